@@ -1,0 +1,77 @@
+//! Errors at each boundary: scene files, the simulation step.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use hecs::Entity;
+
+/// One semantic problem in a scene, named by its entry (`springs[3].b`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Issue {
+    pub location: String,
+    pub message: String,
+}
+
+impl fmt::Display for Issue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.location, self.message)
+    }
+}
+
+/// Why a scene could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Syntax, unknown fields and wrong types, at ron's line and column (1-based).
+    #[error("{path}:{line}:{column}: {message}")]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// Every semantic problem found, one per line.
+    #[error("{}", format_issues(path, issues))]
+    Invalid { path: PathBuf, issues: Vec<Issue> },
+}
+
+fn format_issues(path: &std::path::Path, issues: &[Issue]) -> String {
+    issues
+        .iter()
+        .map(|i| format!("{}: {i}", path.display()))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// Why a step could not be taken.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SimError {
+    #[error("unknown integrator `{0}` (known: harmonic, harmonic-paper, symplectic-euler, explicit-euler, rk4)")]
+    UnknownIntegrator(String),
+    #[error("time step must be finite and > 0, got {0}")]
+    BadStep(f64),
+    #[error("substeps must be ≥ 1")]
+    NoSubsteps,
+    #[error("spring {spring:?} refers to {end:?}, which is not a particle")]
+    DanglingSpring { spring: Entity, end: Entity },
+    #[error(
+        "harmonic-paper is undefined for spring {spring}: eq. 27 as printed takes √(1 − 2ζ²) with ζ = {zeta:.3} > 0.707"
+    )]
+    PaperUndefined { spring: usize, zeta: f64 },
+    #[error("state went non-finite at step {step} (t = {time:.6} s): particle {particle} (scene order)")]
+    NonFinite { step: u64, time: f64, particle: usize },
+}
+
+/// Any error of the crate's API.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}

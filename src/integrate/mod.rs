@@ -1,0 +1,366 @@
+#![doc = include_str!("MATH.md")]
+
+pub mod harmonic;
+pub mod paper;
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::buffers::{PackedSpring, Packed};
+use crate::error::SimError;
+use harmonic::Linear;
+use paper::PaperSpring;
+
+/// The CPU integrators, all over the same packed buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Integrator {
+    /// The corrected closed-form spring step, summed per particle (Jacobi).
+    Harmonic,
+    /// The paper's equations as printed, for comparison only.
+    HarmonicPaper,
+    /// `v += a h; x += v h`.
+    SymplecticEuler,
+    /// `x += v h; v += a h`.
+    ExplicitEuler,
+    /// Classical fourth-order Runge–Kutta: the fine-step reference.
+    Rk4,
+}
+
+impl Integrator {
+    pub const ALL: [Integrator; 5] = [
+        Integrator::Harmonic,
+        Integrator::HarmonicPaper,
+        Integrator::SymplecticEuler,
+        Integrator::ExplicitEuler,
+        Integrator::Rk4,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::Harmonic => "harmonic",
+            Integrator::HarmonicPaper => "harmonic-paper",
+            Integrator::SymplecticEuler => "symplectic-euler",
+            Integrator::ExplicitEuler => "explicit-euler",
+            Integrator::Rk4 => "rk4",
+        }
+    }
+}
+
+impl Default for Integrator {
+    fn default() -> Self {
+        Integrator::Harmonic
+    }
+}
+
+impl fmt::Display for Integrator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Integrator {
+    type Err = SimError;
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        Integrator::ALL
+            .into_iter()
+            .find(|i| i.name() == s)
+            .ok_or_else(|| SimError::UnknownIntegrator(s.to_string()))
+    }
+}
+
+/// Below this many elements a pass runs on the calling thread: rayon's fork costs more.
+const PAR_MIN: usize = 4096;
+const PAR_CHUNK: usize = 1024;
+
+/// How a spring's relative velocity change is computed in the spring pass.
+#[derive(Clone, Copy)]
+enum Law<'a> {
+    Linear(&'a [Linear]),
+    Paper(&'a [PaperSpring], f64),
+}
+
+/// How the particle pass turns summed velocity changes into a new state.
+#[derive(Clone, Copy, PartialEq)]
+enum Update {
+    /// `v += Δv + g h; x += h v` (symplectic Euler, plain harmonic).
+    VelocityFirst,
+    /// `x += h v; v += Δv + g h`.
+    PositionFirst,
+    /// `x += h v + ½ g h² + ΣD n; v += Δv + g h` (harmonic with exact displacement).
+    Exact,
+    /// Algorithm 1 as printed: `v += h Δv + g h; x += h v`.
+    PaperAlgorithm1,
+}
+
+/// Per-scene solver state: step coefficients for the current `h` and scratch, sized at gather.
+#[derive(Clone, Debug)]
+pub struct Solver {
+    pub integrator: Integrator,
+    pub exact_displacement: bool,
+    pub gravity: DVec3,
+    h: f64,
+    lin: Vec<Linear>,
+    paper: Vec<PaperSpring>,
+    sdv: Vec<DVec3>,
+    sdx: Vec<DVec3>,
+    rk: Vec<Vec<DVec3>>,
+}
+
+impl Solver {
+    pub fn new(integrator: Integrator, exact_displacement: bool, gravity: DVec3) -> Self {
+        Self {
+            integrator,
+            exact_displacement,
+            gravity,
+            h: f64::NAN,
+            lin: Vec::new(),
+            paper: Vec::new(),
+            sdv: Vec::new(),
+            sdx: Vec::new(),
+            rk: Vec::new(),
+        }
+    }
+
+    /// Forgets the coefficients, so the next [`Self::prepare`] recomputes them (after a gather).
+    pub fn invalidate(&mut self) {
+        self.h = f64::NAN;
+    }
+
+    /// Sizes scratch and computes step coefficients for `h`. Call after every gather and
+    /// whenever `h` changes; a no-op when nothing did.
+    pub fn prepare(&mut self, packed: &Packed, h: f64) -> Result<(), SimError> {
+        let m = packed.springs.len();
+        let n = packed.particle_count();
+        if self.h == h && self.sdv.len() == m && self.lin.len() == m {
+            return Ok(());
+        }
+        self.sdv.resize(m, DVec3::ZERO);
+        let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
+        self.sdx.resize(if disp { m } else { 0 }, DVec3::ZERO);
+        self.lin.clear();
+        self.paper.clear();
+        self.rk.clear();
+        match self.integrator {
+            Integrator::Harmonic => self.lin.extend(
+                packed.springs.iter().map(|s| harmonic::harmonic(s.omega0_sq(), s.alpha(), h)),
+            ),
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler => self.lin.extend(
+                packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), h)),
+            ),
+            Integrator::Rk4 => {
+                // Acceleration coefficients (h = 1); 10 state-sized scratch vectors.
+                self.lin.extend(
+                    packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)),
+                );
+                self.rk = vec![vec![DVec3::ZERO; n]; 10];
+            }
+            Integrator::HarmonicPaper => {
+                for (k, s) in packed.springs.iter().enumerate() {
+                    if !s.mu.is_finite() {
+                        // Both ends pinned: the spring never acts.
+                        self.paper.push(PaperSpring {
+                            omega0_sq: 1.0,
+                            alpha: 0.0,
+                            omega_d: 1.0,
+                            scale: 0.0,
+                            damped: false,
+                        });
+                        continue;
+                    }
+                    let ma = packed.mass[s.a as usize];
+                    let mb = packed.mass[s.b as usize];
+                    let p = PaperSpring::new(s.stiffness, s.damping, ma, mb)
+                        .map_err(|e| SimError::PaperUndefined { spring: k, zeta: e.zeta })?;
+                    self.paper.push(p);
+                }
+            }
+        }
+        self.h = h;
+        Ok(())
+    }
+
+    /// Advances the packed state by one substep `h` (allocates nothing).
+    pub fn substep(&mut self, packed: &mut Packed, h: f64) -> Result<(), SimError> {
+        self.prepare(packed, h)?;
+        let g = self.gravity;
+        match self.integrator {
+            Integrator::Harmonic => {
+                let disp = self.exact_displacement;
+                let sdx = if disp { Some(&mut self.sdx[..]) } else { None };
+                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.lin), &mut self.sdv, sdx);
+                let update = if disp { Update::Exact } else { Update::VelocityFirst };
+                particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
+            }
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
+                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.lin), &mut self.sdv, None);
+                let update = if self.integrator == Integrator::SymplecticEuler {
+                    Update::VelocityFirst
+                } else {
+                    Update::PositionFirst
+                };
+                particle_pass(packed, &self.sdv, &[], g, h, update);
+            }
+            Integrator::HarmonicPaper => {
+                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Paper(&self.paper, h), &mut self.sdv, None);
+                particle_pass(packed, &self.sdv, &[], g, h, Update::PaperAlgorithm1);
+            }
+            Integrator::Rk4 => self.rk4(packed, h),
+        }
+        Ok(())
+    }
+
+    fn rk4(&mut self, packed: &mut Packed, h: f64) {
+        let g = self.gravity;
+        let [x0, v0, xt, vt, ax, av, bx, bv, sx, sv] = &mut self.rk[..] else {
+            unreachable!("prepare sizes rk to 10 vectors")
+        };
+        x0.copy_from_slice(&packed.x);
+        v0.copy_from_slice(&packed.v);
+        // Stage k: (xt, vt) is the stage state; (ax, av) its derivative; (sx, sv) the weighted sum.
+        for (stage, (c, w)) in [(0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0)].into_iter().enumerate() {
+            if stage == 0 {
+                xt.copy_from_slice(x0);
+                vt.copy_from_slice(v0);
+            } else {
+                for i in 0..x0.len() {
+                    xt[i] = x0[i] + c * h * ax[i];
+                    vt[i] = v0[i] + c * h * av[i];
+                }
+            }
+            spring_pass(&packed.springs, xt, vt, Law::Linear(&self.lin), &mut self.sdv, None);
+            acceleration(packed, &self.sdv, g, bv);
+            bx.copy_from_slice(vt);
+            for i in 0..x0.len() {
+                if stage == 0 {
+                    sx[i] = w * bx[i];
+                    sv[i] = w * bv[i];
+                } else {
+                    sx[i] += w * bx[i];
+                    sv[i] += w * bv[i];
+                }
+            }
+            std::mem::swap(ax, bx);
+            std::mem::swap(av, bv);
+        }
+        for i in 0..x0.len() {
+            if packed.inv_mass[i] != 0.0 {
+                packed.x[i] = x0[i] + h / 6.0 * sx[i];
+                packed.v[i] = v0[i] + h / 6.0 * sv[i];
+            }
+        }
+    }
+}
+
+/// One spring's change of relative velocity `φ n` (and displacement `D n`) from the state.
+#[inline(always)]
+fn spring_update(springs: &[PackedSpring], x: &[DVec3], v: &[DVec3], law: Law<'_>, k: usize) -> (DVec3, f64, f64) {
+    let s = &springs[k];
+    let (a, b) = (s.a as usize, s.b as usize);
+    let d = x[b] - x[a];
+    let len = d.length();
+    let n = d / len;
+    let delta = len - s.rest;
+    let delta_dot = n.dot(v[b] - v[a]);
+    match law {
+        Law::Linear(lin) => {
+            let l = &lin[k];
+            (n, l.p * delta + l.q * delta_dot, l.r * delta + l.s * delta_dot)
+        }
+        Law::Paper(paper, h) => (n, paper[k].phi(delta, delta_dot, h), 0.0),
+    }
+}
+
+/// Pass 1: each spring writes its velocity change `φ n` (and `D n` when `sdx` is given).
+fn spring_pass(
+    springs: &[PackedSpring],
+    x: &[DVec3],
+    v: &[DVec3],
+    law: Law<'_>,
+    sdv: &mut [DVec3],
+    sdx: Option<&mut [DVec3]>,
+) {
+    let m = sdv.len();
+    match sdx {
+        None => {
+            let body = |(k, out): (usize, &mut DVec3)| {
+                let (n, phi, _) = spring_update(springs, x, v, law, k);
+                *out = phi * n;
+            };
+            if m < PAR_MIN {
+                sdv.iter_mut().enumerate().for_each(body);
+            } else {
+                sdv.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+            }
+        }
+        Some(sdx) => {
+            let body = |(k, (dv, dx)): (usize, (&mut DVec3, &mut DVec3))| {
+                let (n, phi, disp) = spring_update(springs, x, v, law, k);
+                *dv = phi * n;
+                *dx = disp * n;
+            };
+            if m < PAR_MIN {
+                sdv.iter_mut().zip(sdx.iter_mut()).enumerate().for_each(body);
+            } else {
+                sdv.par_iter_mut()
+                    .zip(sdx.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(PAR_CHUNK)
+                    .for_each(body);
+            }
+        }
+    }
+}
+
+/// Pass 2: each particle gathers its springs' changes and moves.
+fn particle_pass(packed: &mut Packed, sdv: &[DVec3], sdx: &[DVec3], g: DVec3, h: f64, update: Update) {
+    let Packed { x, v, inv_mass, incidence, .. } = packed;
+    let (inv_mass, inc) = (&inv_mass[..], &*incidence);
+    let body = |(i, (xi, vi)): (usize, (&mut DVec3, &mut DVec3))| {
+        if inv_mass[i] == 0.0 {
+            return;
+        }
+        let dv = inc.sum(sdv, i);
+        match update {
+            Update::VelocityFirst => {
+                *vi += dv + g * h;
+                *xi += h * *vi;
+            }
+            Update::PositionFirst => {
+                *xi += h * *vi;
+                *vi += dv + g * h;
+            }
+            Update::Exact => {
+                *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
+                *vi += dv + g * h;
+            }
+            Update::PaperAlgorithm1 => {
+                *vi += h * dv + g * h;
+                *xi += h * *vi;
+            }
+        }
+    };
+    if x.len() < PAR_MIN {
+        x.iter_mut().zip(v.iter_mut()).enumerate().for_each(body);
+    } else {
+        x.par_iter_mut()
+            .zip(v.par_iter_mut())
+            .enumerate()
+            .with_min_len(PAR_CHUNK)
+            .for_each(body);
+    }
+}
+
+/// Accelerations from per-spring relative accelerations (RK4's derivative).
+fn acceleration(packed: &Packed, sdv: &[DVec3], g: DVec3, out: &mut [DVec3]) {
+    let body = |(i, a): (usize, &mut DVec3)| {
+        *a = if packed.inv_mass[i] == 0.0 { DVec3::ZERO } else { packed.incidence.sum(sdv, i) + g };
+    };
+    if out.len() < PAR_MIN {
+        out.iter_mut().enumerate().for_each(body);
+    } else {
+        out.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+    }
+}

@@ -1,0 +1,65 @@
+//! Diagnostics over the packed state: energy, strain, step size against the springs' periods.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::buffers::Packed;
+
+const PAR_MIN: usize = 4096;
+
+/// Kinetic + spring + gravitational potential energy (J); pinned particles hold none.
+/// Gravity's potential is `−m g·x`, zero at the origin.
+pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
+    let particle = |i: usize| {
+        if packed.inv_mass[i] == 0.0 {
+            0.0
+        } else {
+            let m = packed.mass[i];
+            0.5 * m * packed.v[i].length_squared() - m * gravity.dot(packed.x[i])
+        }
+    };
+    let spring = |k: usize| {
+        let d = packed.stretch(k);
+        0.5 * packed.springs[k].stiffness * d * d
+    };
+    let (n, m) = (packed.particle_count(), packed.springs.len());
+    if n + m < PAR_MIN {
+        (0..n).map(particle).sum::<f64>() + (0..m).map(spring).sum::<f64>()
+    } else {
+        (0..n).into_par_iter().map(particle).sum::<f64>() + (0..m).into_par_iter().map(spring).sum::<f64>()
+    }
+}
+
+/// Largest `|δ|/l0` over all springs.
+pub fn max_strain(packed: &Packed) -> f64 {
+    let strain = |k: usize| packed.stretch(k).abs() / packed.springs[k].rest;
+    let m = packed.springs.len();
+    if m < PAR_MIN {
+        (0..m).map(strain).fold(0.0, f64::max)
+    } else {
+        (0..m).into_par_iter().map(strain).reduce(|| 0.0, f64::max)
+    }
+}
+
+/// `h/h_c` of the stiffest spring, `h_c = π/ω0`, and that spring's index.
+pub fn worst_step_ratio(packed: &Packed, h: f64) -> Option<(f64, usize)> {
+    packed
+        .springs
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (h * s.omega0_sq().sqrt() / std::f64::consts::PI, k))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Index of the first particle whose position or velocity is not finite.
+pub fn first_non_finite(packed: &Packed) -> Option<usize> {
+    (0..packed.particle_count()).find(|&i| !(packed.x[i].is_finite() && packed.v[i].is_finite()))
+}
+
+/// Total linear momentum of the free particles.
+pub fn momentum(packed: &Packed) -> DVec3 {
+    (0..packed.particle_count())
+        .filter(|&i| packed.inv_mass[i] != 0.0)
+        .map(|i| packed.mass[i] * packed.v[i])
+        .sum()
+}

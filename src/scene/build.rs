@@ -1,0 +1,183 @@
+//! Building a World from a validated scene: explicit entries, then the generators.
+
+use glam::DVec3;
+use hecs::{Entity, World};
+
+use super::{Anchor, Cloth, Plane, Rope, Scene, SpringSpec};
+use crate::components::{Particle, Pin, SceneIndex, Spring};
+use crate::integrate::Integrator;
+use crate::SimConfig;
+
+/// A scene's World and the settings it asked for.
+pub struct BuiltScene {
+    pub world: World,
+    pub config: SimConfig,
+}
+
+impl SpringSpec {
+    /// `(κ, c)` for a spring between masses `m_a`, `m_b` (see the module docs for the conversion).
+    pub fn resolve(&self, m_a: f64, m_b: f64) -> (f64, f64) {
+        let mu = m_a * m_b / (m_a + m_b);
+        let stiffness = match (self.stiffness, self.frequency) {
+            (Some(k), _) => k,
+            (None, Some(f)) => mu * (2.0 * std::f64::consts::PI * f).powi(2),
+            (None, None) => 0.0,
+        };
+        let damping = match (self.damping, self.damping_ratio) {
+            (Some(c), _) => c,
+            (None, Some(z)) => 2.0 * z * (stiffness * mu).sqrt(),
+            (None, None) => 0.0,
+        };
+        (stiffness, damping)
+    }
+}
+
+struct Builder {
+    world: World,
+    next: u32,
+}
+
+impl Builder {
+    fn particle(&mut self, position: DVec3, velocity: DVec3, mass: f64, pinned: bool) -> Entity {
+        let p = Particle { position, velocity, mass };
+        let idx = SceneIndex(self.next);
+        self.next += 1;
+        if pinned {
+            self.world.spawn((p, idx, Pin))
+        } else {
+            self.world.spawn((p, idx))
+        }
+    }
+
+    fn spring(&mut self, a: Entity, b: Entity, spec: &SpringSpec, mass: (f64, f64), rest_length: f64) {
+        let (stiffness, damping) = spec.resolve(mass.0, mass.1);
+        self.world.spawn((Spring { a, b, rest_length, stiffness, damping },));
+    }
+
+    fn cloth(&mut self, c: &Cloth) {
+        let (cols, rows) = (c.resolution.0 as usize, c.resolution.1 as usize);
+        let m = c.mass / (cols * rows) as f64;
+        let (du, dv) = (c.size.0 / (cols - 1) as f64, c.size.1 / (rows - 1) as f64);
+        let (u, v) = match c.plane {
+            Plane::Vertical => (DVec3::X, DVec3::NEG_Y),
+            Plane::Horizontal => (DVec3::X, DVec3::Z),
+        };
+        let pinned = |col: usize, row: usize| {
+            let (l, r, t, b) = (col == 0, col == cols - 1, row == 0, row == rows - 1);
+            c.pins.iter().any(|p| match *p {
+                Anchor::TopLeft => t && l,
+                Anchor::TopRight => t && r,
+                Anchor::BottomLeft => b && l,
+                Anchor::BottomRight => b && r,
+                Anchor::TopEdge => t,
+                Anchor::BottomEdge => b,
+                Anchor::LeftEdge => l,
+                Anchor::RightEdge => r,
+                Anchor::Particle(pc, pr) => pc as usize == col && pr as usize == row,
+            })
+        };
+        let origin = DVec3::from(c.origin);
+        let vel = DVec3::from(c.velocity);
+        let mut ids = Vec::with_capacity(cols * rows);
+        for row in 0..rows {
+            for col in 0..cols {
+                let x = origin + u * (col as f64 * du) + v * (row as f64 * dv);
+                ids.push(self.particle(x, vel, m, pinned(col, row)));
+            }
+        }
+        let at = |col: usize, row: usize| ids[row * cols + col];
+        let pos = |col: usize, row: usize| origin + u * (col as f64 * du) + v * (row as f64 * dv);
+        let link = |b: &mut Builder, spec: &SpringSpec, (c0, r0): (usize, usize), (c1, r1): (usize, usize)| {
+            let rest = (pos(c1, r1) - pos(c0, r0)).length();
+            b.spring(at(c0, r0), at(c1, r1), spec, (m, m), rest);
+        };
+        for row in 0..rows {
+            for col in 0..cols {
+                if col + 1 < cols {
+                    link(self, &c.structural, (col, row), (col + 1, row));
+                }
+                if row + 1 < rows {
+                    link(self, &c.structural, (col, row), (col, row + 1));
+                }
+                if let Some(s) = &c.shear {
+                    if col + 1 < cols && row + 1 < rows {
+                        link(self, s, (col, row), (col + 1, row + 1));
+                        link(self, s, (col + 1, row), (col, row + 1));
+                    }
+                }
+                if let Some(s) = &c.bend {
+                    if col + 2 < cols {
+                        link(self, s, (col, row), (col + 2, row));
+                    }
+                    if row + 2 < rows {
+                        link(self, s, (col, row), (col, row + 2));
+                    }
+                }
+            }
+        }
+    }
+
+    fn rope(&mut self, r: &Rope) {
+        let n = r.particles as usize;
+        let m = r.mass / n as f64;
+        let (start, end) = (DVec3::from(r.start), DVec3::from(r.end));
+        let pos = |i: usize| start + (end - start) * (i as f64 / (n - 1) as f64);
+        let ids: Vec<Entity> = (0..n)
+            .map(|i| {
+                let pinned = (i == 0 && r.pin_start) || (i == n - 1 && r.pin_end);
+                self.particle(pos(i), DVec3::ZERO, m, pinned)
+            })
+            .collect();
+        for i in 0..n - 1 {
+            self.spring(ids[i], ids[i + 1], &r.spring, (m, m), (pos(i + 1) - pos(i)).length());
+        }
+        if let Some(bend) = &r.bend {
+            for i in 0..n.saturating_sub(2) {
+                self.spring(ids[i], ids[i + 2], bend, (m, m), (pos(i + 2) - pos(i)).length());
+            }
+        }
+    }
+}
+
+impl Scene {
+    /// Builds the World. The scene must have passed [`Scene::validate`] (as [`Scene::load`] ensures).
+    pub fn build(&self) -> BuiltScene {
+        let mut b = Builder {
+            world: World::new(),
+            next: 0,
+        };
+        let ids: Vec<Entity> = self
+            .particles
+            .iter()
+            .map(|p| b.particle(p.position.into(), p.velocity.into(), p.mass, p.pinned))
+            .collect();
+        for s in &self.springs {
+            let (pa, pb) = (&self.particles[s.a], &self.particles[s.b]);
+            let rest = s
+                .rest_length
+                .unwrap_or_else(|| (DVec3::from(pb.position) - DVec3::from(pa.position)).length());
+            b.spring(ids[s.a], ids[s.b], &s.spec(), (pa.mass, pb.mass), rest);
+        }
+        for c in &self.cloths {
+            b.cloth(c);
+        }
+        for r in &self.ropes {
+            b.rope(r);
+        }
+        let integrator = self
+            .integrator
+            .as_deref()
+            .and_then(|n| n.parse::<Integrator>().ok())
+            .unwrap_or_default();
+        BuiltScene {
+            world: b.world,
+            config: SimConfig {
+                dt: self.dt,
+                substeps: self.substeps,
+                gravity: self.gravity.into(),
+                integrator,
+                exact_displacement: self.exact_displacement,
+            },
+        }
+    }
+}

@@ -1,0 +1,237 @@
+//! RON scenes: the schema authors write, loading with located errors, and building a World.
+//!
+//! A scene lists explicit `particles` and `springs` (indices are positions in `particles`)
+//! and any number of generated `cloths` and `ropes`. Particle order in the built scene, and
+//! so in trajectories: explicit particles, then each cloth row-major (row 0 first, columns
+//! left to right), then each rope from `start` to `end`.
+//!
+//! # Stiffness by frequency
+//! A spring takes either `stiffness` (κ, N/m) or `frequency` (f, Hz), and either `damping`
+//! (c, N·s/m) or `damping_ratio` (ζ). With the reduced mass `μ = m_a m_b/(m_a+m_b)` of its two
+//! end particles (as if both were free, so a pin does not change the material):
+//! `μ δ̈ = −κ δ − c δ̇` has natural angular frequency `ω0 = √(κ/μ) = 2πf` and damping ratio
+//! `ζ = c/(2√(κμ))`, hence `κ = μ (2πf)²` and `c = 2 ζ μ (2πf)`. With `stiffness` given,
+//! `damping_ratio` means `c = 2 ζ √(κ μ)`.
+
+mod build;
+mod validate;
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::SceneError;
+
+pub use build::BuiltScene;
+
+/// A vector as `(x, y, z)`.
+pub type V3 = [f64; 3];
+
+fn one() -> u32 {
+    1
+}
+fn yes() -> bool {
+    true
+}
+fn default_gravity() -> V3 {
+    [0.0, -9.81, 0.0]
+}
+
+/// Refuse generators asking for more particles than this before allocating anything.
+pub const MAX_PARTICLES: u64 = 1 << 26;
+
+/// A scene file.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields, rename = "Scene")]
+pub struct Scene {
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Frame step (s): one `Simulation::step` advances this much, in `substeps` substeps.
+    pub dt: f64,
+    #[serde(default = "one")]
+    pub substeps: u32,
+    #[serde(default = "default_gravity")]
+    pub gravity: V3,
+    /// Integrator name; the engine's default (`harmonic`) when absent.
+    #[serde(default)]
+    pub integrator: Option<String>,
+    /// Harmonic only: move positions by each spring's exact displacement too.
+    #[serde(default)]
+    pub exact_displacement: bool,
+    /// Default run length for `harmonic run` (s).
+    #[serde(default)]
+    pub seconds: Option<f64>,
+    #[serde(default)]
+    pub particles: Vec<ParticleDef>,
+    #[serde(default)]
+    pub springs: Vec<SpringDef>,
+    #[serde(default)]
+    pub cloths: Vec<Cloth>,
+    #[serde(default)]
+    pub ropes: Vec<Rope>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ParticleDef {
+    pub position: V3,
+    #[serde(default)]
+    pub velocity: V3,
+    /// kg, > 0 (also for pinned particles, whose mass sets frequency-given springs).
+    pub mass: f64,
+    #[serde(default)]
+    pub pinned: bool,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpringDef {
+    pub a: usize,
+    pub b: usize,
+    #[serde(default)]
+    pub stiffness: Option<f64>,
+    #[serde(default)]
+    pub damping: Option<f64>,
+    #[serde(default)]
+    pub frequency: Option<f64>,
+    #[serde(default)]
+    pub damping_ratio: Option<f64>,
+    /// Defaults to the initial distance of the two ends.
+    #[serde(default)]
+    pub rest_length: Option<f64>,
+}
+
+impl SpringDef {
+    pub fn spec(&self) -> SpringSpec {
+        SpringSpec {
+            stiffness: self.stiffness,
+            damping: self.damping,
+            frequency: self.frequency,
+            damping_ratio: self.damping_ratio,
+        }
+    }
+}
+
+/// Spring material: `stiffness` or `frequency`, plus optionally `damping` or `damping_ratio`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SpringSpec {
+    #[serde(default)]
+    pub stiffness: Option<f64>,
+    #[serde(default)]
+    pub damping: Option<f64>,
+    #[serde(default)]
+    pub frequency: Option<f64>,
+    #[serde(default)]
+    pub damping_ratio: Option<f64>,
+}
+
+/// Which plane a cloth is laid out in.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+pub enum Plane {
+    /// Hanging: columns along +x, rows downward along −y from `origin`.
+    #[default]
+    Vertical,
+    /// Lying: columns along +x, rows along +z from `origin`.
+    Horizontal,
+}
+
+/// A pinned part of a cloth. Row 0 is the "top" (the row at `origin`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+pub enum Anchor {
+    TopLeft,
+    TopRight,
+    BottomLeft,
+    BottomRight,
+    TopEdge,
+    BottomEdge,
+    LeftEdge,
+    RightEdge,
+    /// `(column, row)`.
+    Particle(u32, u32),
+}
+
+/// A rectangular cloth grid.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Cloth {
+    /// Position of particle (column 0, row 0).
+    pub origin: V3,
+    /// `(width, height)` in metres.
+    pub size: (f64, f64),
+    /// `(columns, rows)` of particles, each ≥ 2.
+    pub resolution: (u32, u32),
+    #[serde(default)]
+    pub plane: Plane,
+    /// Total mass (kg), spread evenly over the particles.
+    pub mass: f64,
+    /// Springs to the right and lower neighbours.
+    pub structural: SpringSpec,
+    /// Springs along both diagonals of each cell.
+    #[serde(default)]
+    pub shear: Option<SpringSpec>,
+    /// Springs to the second neighbour along rows and columns.
+    #[serde(default)]
+    pub bend: Option<SpringSpec>,
+    #[serde(default)]
+    pub pins: Vec<Anchor>,
+    #[serde(default)]
+    pub velocity: V3,
+}
+
+/// A rope or chain of equal particles from `start` to `end`.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Rope {
+    pub start: V3,
+    pub end: V3,
+    /// Number of particles, ≥ 2.
+    pub particles: u32,
+    /// Total mass (kg).
+    pub mass: f64,
+    pub spring: SpringSpec,
+    #[serde(default = "yes")]
+    pub pin_start: bool,
+    #[serde(default)]
+    pub pin_end: bool,
+    /// Springs to the second neighbour (stiff chains resist folding).
+    #[serde(default)]
+    pub bend: Option<SpringSpec>,
+}
+
+impl Scene {
+    /// Reads, parses and validates a scene file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Scene::parse(&text, path)
+    }
+
+    /// Parses and validates scene text; `path` only names the source in errors.
+    pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        let path: PathBuf = path.as_ref().to_path_buf();
+        let options = ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+        let scene: Scene = options.from_str(text).map_err(|e| SceneError::Parse {
+            path: path.clone(),
+            line: e.span.start.line,
+            column: e.span.start.col,
+            message: e.code.to_string(),
+        })?;
+        let issues = scene.validate();
+        if issues.is_empty() {
+            Ok(scene)
+        } else {
+            Err(SceneError::Invalid { path, issues })
+        }
+    }
+
+    /// Number of particles the scene builds (saturating, so huge generators can be refused).
+    pub fn particle_count(&self) -> u64 {
+        let cloth = self.cloths.iter().map(|c| c.resolution.0 as u64 * c.resolution.1 as u64);
+        let rope = self.ropes.iter().map(|r| r.particles as u64);
+        cloth.chain(rope).fold(self.particles.len() as u64, u64::saturating_add)
+    }
+}

@@ -1,0 +1,217 @@
+//! The `Simulation` facade: a World, its packed buffers and the schedule that steps them.
+
+use std::path::Path;
+use std::time::Instant;
+
+use glam::DVec3;
+use hecs::World;
+
+use crate::buffers::Packed;
+use crate::error::{Error, SimError};
+use crate::integrate::{Integrator, Solver};
+use crate::metrics;
+use crate::scene::Scene;
+use crate::schedule::StepStats;
+
+/// How a simulation steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimConfig {
+    /// Frame step (s).
+    pub dt: f64,
+    /// Substeps per frame; the integrator's step is `h = dt / substeps`.
+    pub substeps: u32,
+    pub gravity: DVec3,
+    pub integrator: Integrator,
+    /// Harmonic only: move positions by each spring's closed-form displacement too.
+    pub exact_displacement: bool,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            dt: 1.0 / 60.0,
+            substeps: 1,
+            gravity: DVec3::new(0.0, -9.81, 0.0),
+            integrator: Integrator::default(),
+            exact_displacement: false,
+        }
+    }
+}
+
+impl SimConfig {
+    pub fn h(&self) -> f64 {
+        self.dt / self.substeps as f64
+    }
+    fn check(&self) -> Result<(), SimError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(SimError::BadStep(self.dt));
+        }
+        if self.substeps == 0 {
+            return Err(SimError::NoSubsteps);
+        }
+        Ok(())
+    }
+}
+
+/// Live figures of the current state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Diagnostics {
+    /// Kinetic + spring + gravitational energy (J).
+    pub energy: f64,
+    /// Largest `|δ|/l0`.
+    pub max_strain: f64,
+    /// `h/h_c` of the stiffest spring (`h_c = π/ω0`).
+    pub step_ratio: f64,
+}
+
+/// A mass-spring simulation over a hecs World.
+pub struct Simulation {
+    world: World,
+    config: SimConfig,
+    packed: Packed,
+    solver: Solver,
+    dirty: bool,
+    steps: u64,
+    time: f64,
+    stats: StepStats,
+}
+
+impl Simulation {
+    /// Takes a World of [`crate::Particle`], [`crate::Spring`] and [`crate::Pin`] components.
+    pub fn new(world: World, config: SimConfig) -> Result<Self, SimError> {
+        config.check()?;
+        let mut sim = Self {
+            world,
+            config,
+            packed: Packed::default(),
+            solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
+            dirty: true,
+            steps: 0,
+            time: 0.0,
+            stats: StepStats::default(),
+        };
+        sim.gather()?;
+        Ok(sim)
+    }
+
+    pub fn from_scene(scene: &Scene) -> Result<Self, SimError> {
+        let built = scene.build();
+        Self::new(built.world, built.config)
+    }
+
+    /// Loads, validates and builds a scene file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, Error> {
+        Ok(Self::from_scene(&Scene::load(path)?)?)
+    }
+
+    /// Advances one frame of `dt`. Stages, in order:
+    /// 1. gather: World → buffers, only if the World may have changed (see [`Self::world_mut`]);
+    /// 2. integrate: `substeps` substeps on the buffers (no allocation);
+    /// 3. scatter: buffers → World, after a check that the state is finite.
+    ///
+    /// A scene without colliders has no contact stage. On a non-finite state the World keeps
+    /// the last finite frame and the error names the first bad particle.
+    pub fn step(&mut self) -> Result<&StepStats, SimError> {
+        let t0 = Instant::now();
+        let gathered = self.dirty;
+        if self.dirty {
+            self.gather()?;
+        }
+        let t1 = Instant::now();
+        let h = self.config.h();
+        for _ in 0..self.config.substeps {
+            self.solver.substep(&mut self.packed, h)?;
+        }
+        let t2 = Instant::now();
+        self.steps += 1;
+        self.time += self.config.dt;
+        if let Some(particle) = metrics::first_non_finite(&self.packed) {
+            return Err(SimError::NonFinite {
+                step: self.steps,
+                time: self.time,
+                particle,
+            });
+        }
+        self.packed.scatter(&mut self.world);
+        let t3 = Instant::now();
+        self.stats = StepStats {
+            gather: t1 - t0,
+            integrate: t2 - t1,
+            scatter: t3 - t2,
+            gathered,
+            substeps: self.config.substeps,
+        };
+        Ok(&self.stats)
+    }
+
+    fn gather(&mut self) -> Result<(), SimError> {
+        self.packed = Packed::gather(&self.world)?;
+        self.solver.invalidate();
+        self.solver.prepare(&self.packed, self.config.h())?;
+        self.dirty = false;
+        Ok(())
+    }
+
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Mutable access; the next step re-gathers the World (state and topology).
+    pub fn world_mut(&mut self) -> &mut World {
+        self.dirty = true;
+        &mut self.world
+    }
+
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Changes the step settings; coefficients are recomputed on the next step.
+    pub fn set_config(&mut self, config: SimConfig) -> Result<(), SimError> {
+        config.check()?;
+        let keep_solver = config.integrator == self.config.integrator
+            && config.exact_displacement == self.config.exact_displacement
+            && config.gravity == self.config.gravity;
+        self.config = config;
+        if !keep_solver {
+            self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
+        }
+        self.solver.prepare(&self.packed, config.h())
+    }
+
+    /// Positions in scene order (see [`crate::SceneIndex`]), as of the last step.
+    pub fn positions(&self) -> &[DVec3] {
+        &self.packed.x
+    }
+
+    pub fn velocities(&self) -> &[DVec3] {
+        &self.packed.v
+    }
+
+    /// The packed buffers (read-only), for metrics and tools.
+    pub fn packed(&self) -> &Packed {
+        &self.packed
+    }
+
+    pub fn stats(&self) -> &StepStats {
+        &self.stats
+    }
+
+    /// Frames stepped so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Simulated time (s).
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    pub fn diagnostics(&self) -> Diagnostics {
+        Diagnostics {
+            energy: metrics::energy(&self.packed, self.config.gravity),
+            max_strain: metrics::max_strain(&self.packed),
+            step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h()).map_or(0.0, |r| r.0),
+        }
+    }
+}
