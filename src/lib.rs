@@ -30,6 +30,7 @@
 //! assert!((sag - 9.81 / 1000.0).abs() < 1e-3, "{sag}");
 //! ```
 
+pub mod bench;
 pub mod buffers;
 pub mod components;
 pub mod error;
@@ -37,6 +38,8 @@ pub mod integrate;
 pub mod metrics;
 pub mod scene;
 pub mod schedule;
+pub mod stability;
+pub mod statics;
 mod simulation;
 
 pub use components::{Particle, Pin, SceneIndex, Spring};

@@ -1,1 +1,243 @@
-fn main(){}
+//! `harmonic`: run, check, measure stability of and benchmark scenes, headless.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::{Parser, Subcommand};
+use harmonic::{bench, stability, Integrator, Scene, SimError, Simulation};
+
+#[derive(Parser)]
+#[command(name = "harmonic", version, about = "Mass-spring simulation with a closed-form spring step")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a scene headless and print a summary.
+    Run(RunArgs),
+    /// Load and validate scenes; print every problem with its location.
+    Check {
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+    },
+    /// Run the hard-case stability suite and print Markdown tables.
+    Stability {
+        /// Simulated seconds per hard case.
+        #[arg(long, default_value_t = 10.0)]
+        seconds: f64,
+        /// Also run the 128×128 cloth (minutes).
+        #[arg(long)]
+        full: bool,
+        /// Write the report here as well as to stdout.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
+    Bench {
+        /// Cloth resolution N (N×N particles).
+        #[arg(long, default_value_t = 128)]
+        size: u32,
+        /// Substeps timed per integrator and repeat.
+        #[arg(long, default_value_t = 200)]
+        substeps: u32,
+        /// Repeats; the median is reported.
+        #[arg(long, default_value_t = 5)]
+        repeats: u32,
+        /// Integrators to compare (default: all but the RK4 reference).
+        #[arg(long, value_delimiter = ',')]
+        integrators: Vec<String>,
+    },
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    scene: PathBuf,
+    /// Simulated seconds (default: the scene's `seconds`, else 1).
+    #[arg(long, conflicts_with = "steps")]
+    seconds: Option<f64>,
+    /// Frames to step.
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Override the scene's frame step (s).
+    #[arg(long)]
+    dt: Option<f64>,
+    /// Override the scene's substeps per frame.
+    #[arg(long)]
+    substeps: Option<u32>,
+    /// Override the scene's integrator.
+    #[arg(long)]
+    integrator: Option<String>,
+    /// Harmonic: move positions by each spring's exact displacement too.
+    #[arg(long)]
+    exact_displacement: bool,
+    /// Write `step,time,particle,x,y,z,vx,vy,vz` rows (scene order) to this CSV file.
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+    /// Record every M-th frame in the trajectory (step 0 always).
+    #[arg(long, default_value_t = 1)]
+    every: u64,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run(args) => run(args),
+        Command::Check { scenes } => check(&scenes),
+        Command::Stability { seconds, full, out } => {
+            let report = stability::report(&stability::Options { seconds, full });
+            print!("{report}");
+            match out {
+                Some(path) => std::fs::write(&path, &report).map_err(|e| format!("{}: {e}", path.display())),
+                None => Ok(()),
+            }
+        }
+        Command::Bench {
+            size,
+            substeps,
+            repeats,
+            integrators,
+        } => parse_integrators(&integrators).map(|list| {
+            print!("{}", bench::report(size, substeps, repeats, &list));
+        }),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(msg) => {
+            eprintln!("error: {msg}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn parse_integrators(names: &[String]) -> Result<Vec<Integrator>, String> {
+    if names.is_empty() {
+        return Ok(Integrator::ALL.into_iter().filter(|i| *i != Integrator::Rk4).collect());
+    }
+    names.iter().map(|n| n.parse::<Integrator>().map_err(|e| e.to_string())).collect()
+}
+
+fn check(paths: &[PathBuf]) -> Result<(), String> {
+    let mut bad = 0;
+    for path in paths {
+        match Scene::load(path) {
+            Ok(scene) => println!("{}: ok ({} particles)", path.display(), scene.particle_count()),
+            Err(e) => {
+                eprintln!("{e}");
+                bad += 1;
+            }
+        }
+    }
+    if bad == 0 {
+        Ok(())
+    } else {
+        Err(format!("{bad} of {} scene(s) invalid", paths.len()))
+    }
+}
+
+fn run(args: RunArgs) -> Result<(), String> {
+    let scene = Scene::load(&args.scene).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
+    let mut config = *sim.config();
+    if let Some(dt) = args.dt {
+        config.dt = dt;
+    }
+    if let Some(k) = args.substeps {
+        config.substeps = k;
+    }
+    if let Some(name) = &args.integrator {
+        config.integrator = name.parse().map_err(|e: SimError| e.to_string())?;
+    }
+    config.exact_displacement |= args.exact_displacement;
+    sim.set_config(config).map_err(|e| e.to_string())?;
+    if args.every == 0 {
+        return Err("--every must be ≥ 1".into());
+    }
+    let steps = match (args.steps, args.seconds.or(scene.seconds)) {
+        (Some(n), _) => n,
+        (None, Some(t)) => (t / config.dt).round().max(1.0) as u64,
+        (None, None) => (1.0 / config.dt).round().max(1.0) as u64,
+    };
+
+    let mut traj = match &args.trajectory {
+        Some(path) => {
+            let f = File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+            let mut w = BufWriter::new(f);
+            writeln!(w, "step,time,particle,x,y,z,vx,vy,vz").map_err(|e| e.to_string())?;
+            write_rows(&mut w, &sim, 0).map_err(|e| e.to_string())?;
+            Some(w)
+        }
+        None => None,
+    };
+
+    let packed = sim.packed();
+    let (n, m) = (packed.particle_count(), packed.springs.len());
+    let start = sim.diagnostics();
+    let ratio = harmonic::metrics::worst_step_ratio(packed, config.h());
+    println!("scene: {} ({n} particles, {m} springs)", args.scene.display());
+    println!(
+        "integrator: {}{}, dt {} s, {} substep(s), h = {:.4e} s",
+        config.integrator,
+        if config.exact_displacement { " (exact displacement)" } else { "" },
+        config.dt,
+        config.substeps,
+        config.h()
+    );
+    match ratio {
+        Some((r, k)) => println!("h/h_c of the stiffest spring: {r:.4} (spring {k}, h_c = π/ω0)"),
+        None => println!("h/h_c of the stiffest spring: no springs"),
+    }
+
+    let mut max_strain = start.max_strain;
+    let t0 = Instant::now();
+    let mut failure = None;
+    for step in 1..=steps {
+        if let Err(e) = sim.step() {
+            failure = Some(e);
+            break;
+        }
+        max_strain = max_strain.max(harmonic::metrics::max_strain(sim.packed()));
+        if let Some(w) = traj.as_mut() {
+            if step % args.every == 0 {
+                write_rows(w, &sim, step).map_err(|e| e.to_string())?;
+            }
+        }
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    if let Some(w) = traj.as_mut() {
+        w.flush().map_err(|e| e.to_string())?;
+    }
+    let done = sim.steps();
+    let end = sim.diagnostics();
+    let substeps = done * config.substeps as u64;
+    println!(
+        "steps: {done} frame(s), {substeps} substep(s), {:.4} s simulated in {wall:.3} s wall ({:.0} steps/s, {:.1} M spring-substeps/s)",
+        sim.time(),
+        done as f64 / wall,
+        (m as f64 * substeps as f64) / wall / 1e6
+    );
+    println!("max strain: {:.4} % (largest |δ|/l0 over the run)", 100.0 * max_strain);
+    println!("energy: start {:.6e} J, end {:.6e} J", start.energy, end.energy);
+    match failure {
+        None => {
+            println!("non-finite: none");
+            Ok(())
+        }
+        Some(e) => {
+            println!("non-finite: yes");
+            Err(format!("run stopped: {e}"))
+        }
+    }
+}
+
+fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Result<()> {
+    let t = step as f64 * sim.config().dt;
+    for (i, (x, v)) in sim.positions().iter().zip(sim.velocities()).enumerate() {
+        writeln!(w, "{step},{t},{i},{},{},{},{},{},{}", x.x, x.y, x.z, v.x, v.y, v.z)?;
+    }
+    Ok(())
+}

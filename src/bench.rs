@@ -1,0 +1,111 @@
+//! `harmonic bench`: spring-substeps per second of each integrator on one cloth, side by side.
+
+use std::fmt::Write;
+use std::time::Instant;
+
+use glam::DVec3;
+
+use crate::buffers::Packed;
+use crate::integrate::{Integrator, Solver};
+use crate::scene::{Anchor, Cloth, Plane, Scene, SpringSpec};
+
+/// An `n`×`n` hanging cloth, 1 kg over 1 m × 1 m, structural + shear + bend, pinned at the two
+/// top corners (128×128: 16,384 particles, 97,026 springs).
+pub fn hanging_cloth(n: u32) -> Scene {
+    let spec = |k: f64| SpringSpec {
+        stiffness: Some(k),
+        damping: Some(0.01),
+        ..Default::default()
+    };
+    Scene {
+        name: Some(format!("hanging cloth {n}×{n}")),
+        dt: 1e-4,
+        substeps: 1,
+        gravity: [0.0, -9.81, 0.0],
+        integrator: None,
+        exact_displacement: false,
+        seconds: None,
+        particles: vec![],
+        springs: vec![],
+        cloths: vec![Cloth {
+            origin: [-0.5, 1.0, 0.0],
+            size: (1.0, 1.0),
+            resolution: (n, n),
+            plane: Plane::Vertical,
+            mass: 1.0,
+            structural: spec(1e3),
+            shear: Some(spec(1e3)),
+            bend: Some(spec(1e2)),
+            pins: vec![Anchor::TopLeft, Anchor::TopRight],
+            velocity: [0.0; 3],
+        }],
+        ropes: vec![],
+    }
+}
+
+/// One row of the bench.
+pub struct Row {
+    pub integrator: Integrator,
+    /// Median spring-substeps per second.
+    pub rate: f64,
+}
+
+/// Times `substeps` substeps of each integrator, `repeats` times round-robin, and reports medians.
+pub fn measure(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -> (usize, Vec<Row>) {
+    let scene = hanging_cloth(n);
+    let packed = Packed::gather(&scene.build().world).expect("generated scene is consistent");
+    let h = scene.dt;
+    let g = DVec3::from(scene.gravity);
+    let m = packed.springs.len();
+    let mut samples = vec![Vec::new(); integrators.len()];
+    let mut runs: Vec<(Packed, Solver)> = integrators
+        .iter()
+        .map(|&i| {
+            let mut s = Solver::new(i, false, g);
+            let mut p = packed.clone();
+            s.prepare(&p, h).expect("bench cloth is under-damped");
+            for _ in 0..10 {
+                s.substep(&mut p, h).expect("prepared");
+            }
+            (p, s)
+        })
+        .collect();
+    for _ in 0..repeats {
+        for (k, (p, s)) in runs.iter_mut().enumerate() {
+            let t = Instant::now();
+            for _ in 0..substeps {
+                s.substep(p, h).expect("prepared");
+            }
+            samples[k].push(m as f64 * substeps as f64 / t.elapsed().as_secs_f64());
+        }
+    }
+    let rows = integrators
+        .iter()
+        .zip(samples)
+        .map(|(&integrator, mut v)| {
+            v.sort_by(f64::total_cmp);
+            Row { integrator, rate: v[v.len() / 2] }
+        })
+        .collect();
+    (m, rows)
+}
+
+/// The bench as a Markdown table.
+pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -> String {
+    let (m, rows) = measure(n, substeps, repeats, integrators);
+    let threads = rayon::current_num_threads();
+    let reference = rows.iter().find(|r| r.integrator == Integrator::SymplecticEuler).map(|r| r.rate);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "cloth {n}×{n}: {} particles, {m} springs; {substeps} substeps × {repeats} repeats (median), {threads} threads\n",
+        n * n
+    );
+    let _ = writeln!(out, "| integrator | M spring-substeps/s | ns per spring-substep | vs symplectic Euler |");
+    let _ = writeln!(out, "|---|---|---|---|");
+    for r in &rows {
+        let ratio = reference.map_or("-".to_string(), |s| format!("{:.2}×", r.rate / s));
+        let _ = writeln!(out, "| {} | {:.1} | {:.2} | {ratio} |", r.integrator, r.rate / 1e6, 1e9 / r.rate);
+    }
+    out
+}
