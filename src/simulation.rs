@@ -71,6 +71,8 @@ pub struct Simulation {
     packed: Packed,
     solver: Solver,
     dirty: bool,
+    /// Whether the passes run on rayon's pool (large scenes only).
+    parallel: bool,
     steps: u64,
     time: f64,
     stats: StepStats,
@@ -86,6 +88,7 @@ impl Simulation {
             packed: Packed::default(),
             solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
             dirty: true,
+            parallel: false,
             steps: 0,
             time: 0.0,
             stats: StepStats::default(),
@@ -119,8 +122,14 @@ impl Simulation {
         }
         let t1 = Instant::now();
         let h = self.config.h();
-        for _ in 0..self.config.substeps {
-            self.solver.substep(&mut self.packed, h)?;
+        let (solver, packed, substeps) = (&mut self.solver, &mut self.packed, self.config.substeps);
+        let mut integrate = move || (0..substeps).try_for_each(|_| solver.substep(packed, h));
+        if self.parallel {
+            // One rayon job per frame: the passes inside run from a worker's own deque, so
+            // the only allocation is the injector's queue block, recycled every 63 frames.
+            rayon::scope(|_| integrate())?;
+        } else {
+            integrate()?;
         }
         let t2 = Instant::now();
         self.steps += 1;
@@ -147,6 +156,7 @@ impl Simulation {
     fn gather(&mut self) -> Result<(), SimError> {
         self.packed = Packed::gather(&self.world)?;
         self.solver.invalidate();
+        self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.solver.prepare(&self.packed, self.config.h())?;
         self.dirty = false;
         Ok(())

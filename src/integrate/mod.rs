@@ -75,6 +75,11 @@ impl FromStr for Integrator {
 const PAR_MIN: usize = 4096;
 const PAR_CHUNK: usize = 1024;
 
+/// Whether any pass over this scene goes to rayon's pool.
+pub fn runs_parallel(packed: &Packed) -> bool {
+    packed.particle_count() >= PAR_MIN || packed.springs.len() >= PAR_MIN
+}
+
 /// How a spring's relative velocity change is computed in the spring pass.
 #[derive(Clone, Copy)]
 enum Law<'a> {

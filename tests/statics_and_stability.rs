@@ -1,0 +1,54 @@
+//! The statics relaxation against a closed form, and the stability measure against the
+//! single-oscillator stability bounds that are known exactly.
+
+use glam::DVec3;
+use harmonic::buffers::Packed;
+use harmonic::stability::{self, Start};
+use harmonic::{statics, Integrator};
+
+fn pack(scene: &harmonic::Scene) -> Packed {
+    Packed::gather(&scene.build().world).unwrap()
+}
+
+#[test]
+fn relaxation_finds_the_hanging_chain_closed_form() {
+    let (from_rest, strain) = stability::chain(20, 0.0, Start::Rest);
+    let (exact, _) = stability::chain(20, 0.0, Start::Equilibrium);
+    let p = pack(&from_rest);
+    let relaxed = statics::relax(&p, DVec3::from(from_rest.gravity), 1e-10, 2_000_000);
+    let q = pack(&exact);
+    let err = relaxed.positions.iter().zip(&q.x).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
+    println!("relaxed in {} iterations, max |Δx| {err:.2e} m", relaxed.iterations);
+    assert!(err < 1e-8, "relaxed chain is {err} m from the closed form");
+    assert!((statics::static_strain(&p, &relaxed) - strain).abs() < 1e-6);
+}
+
+#[test]
+fn equilibrium_start_stays_put_with_rk4() {
+    // The closed-form equilibrium is a fixed point of the dynamics.
+    let (scene, strain) = stability::chain(20, 0.0, Start::Equilibrium);
+    let p = pack(&scene);
+    let hc = stability::h_crit(&p);
+    let o = stability::run(&p, Integrator::Rk4, DVec3::from(scene.gravity), 0.2 * hc, 1.0, 1.0);
+    match o {
+        stability::Outcome::Bounded { max_strain, .. } => assert!((max_strain / strain - 1.0).abs() < 1e-6, "{max_strain} vs {strain}"),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn single_spring_thresholds_match_the_oscillator_bounds() {
+    // Symplectic Euler on an undamped oscillator is stable iff ω h ≤ 2: h/h_c ≤ 2/π.
+    let p = pack(&stability::pair(1.0, 0.0, false, Start::Equilibrium).0);
+    let se = stability::threshold(&p, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
+    println!("symplectic Euler: {se:.4} (exact {:.4})", 2.0 / std::f64::consts::PI);
+    assert!((se - 2.0 / std::f64::consts::PI).abs() < 0.01, "{se}");
+    // Harmonic with exact displacement integrates an isolated spring exactly: never unstable.
+    assert_eq!(stability::threshold(&p, Integrator::Harmonic, true, 10.0), None);
+    // Over-damped: the closed form is stable at any step (MATH: ∞), symplectic Euler is not.
+    let p2 = pack(&stability::pair(1.0, 2.0, false, Start::Equilibrium).0);
+    assert_eq!(stability::threshold(&p2, Integrator::Harmonic, false, 10.0), None);
+    let se2 = stability::threshold(&p2, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
+    println!("symplectic Euler at ζ = 2: {se2:.4}");
+    assert!(se2 < 0.3, "{se2}");
+}

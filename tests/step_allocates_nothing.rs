@@ -1,0 +1,64 @@
+//! The step allocates nothing once the scene is gathered. On the parallel path the frame is
+//! one rayon job; rayon's injector queue recycles a block every 63 jobs, the only allocation.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use harmonic::prelude::*;
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations_per_frame(n: u32, integrator: Integrator, exact: bool) -> f64 {
+    let mut scene = harmonic::bench::hanging_cloth(n);
+    scene.integrator = Some(integrator.name().to_string());
+    scene.exact_displacement = exact;
+    scene.substeps = 4;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..5 {
+        sim.step().unwrap();
+    }
+    let frames = 630;
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..frames {
+        sim.step().unwrap();
+    }
+    (ALLOCS.load(Ordering::Relaxed) - before) as f64 / frames as f64
+}
+
+#[test]
+fn stepping_allocates_nothing() {
+    // One test thread: the counter sees only this test.
+    for (integrator, exact) in [
+        (Integrator::Harmonic, false),
+        (Integrator::Harmonic, true),
+        (Integrator::SymplecticEuler, false),
+        (Integrator::ExplicitEuler, false),
+        (Integrator::Rk4, false),
+    ] {
+        // 24×24 (3,218 springs): every pass on the calling thread.
+        let serial = allocations_per_frame(24, integrator, exact);
+        // 72×72 = 5184 particles: passes on rayon's pool.
+        let parallel = allocations_per_frame(72, integrator, exact);
+        println!("{integrator} (exact {exact}): {serial} allocations per frame serial, {parallel} parallel");
+        assert_eq!(serial, 0.0, "{integrator} allocates in the step");
+        assert!(parallel <= 1.0 / 63.0 + 1e-9, "{integrator} allocates {parallel} times per frame");
+    }
+}
