@@ -30,14 +30,16 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
     }
 }
 
-/// Largest `|δ|/l0` over all springs.
+/// Largest `|δ|/l0` over all springs; NaN if any spring's is.
 pub fn max_strain(packed: &Packed) -> f64 {
     let strain = |k: usize| packed.stretch(k).abs() / packed.springs[k].rest;
+    // Unlike f64::max, keeps a NaN so a broken state cannot report a small strain.
+    let max = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) };
     let m = packed.springs.len();
     if m < PAR_MIN {
-        (0..m).map(strain).fold(0.0, f64::max)
+        (0..m).map(strain).fold(0.0, max)
     } else {
-        (0..m).into_par_iter().map(strain).reduce(|| 0.0, f64::max)
+        (0..m).into_par_iter().map(strain).reduce(|| 0.0, max)
     }
 }
 

@@ -19,10 +19,24 @@ pub struct Relaxed {
 /// stiffest spring, all velocities zeroed whenever the kinetic energy passes a peak
 /// (kinetic damping). Stops when every particle's net acceleration is below `tol` (m/s²) or after `max_iter` steps.
 pub fn relax(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize) -> Relaxed {
+    let w_max = packed.springs.iter().map(|s| s.omega0_sq()).fold(0.0, f64::max).sqrt();
+    // 0.1 h_c is inside symplectic Euler's stable range on chains and cloth (about 0.3);
+    // should the network still diverge, halve the step and start again.
+    let mut h = if w_max > 0.0 { 0.1 * std::f64::consts::PI / w_max } else { 1e-3 };
+    let mut out = relax_at(packed, gravity, tol, max_iter, h);
+    for _ in 0..6 {
+        if out.positions.iter().all(|x| x.is_finite()) {
+            break;
+        }
+        h *= 0.5;
+        out = relax_at(packed, gravity, tol, max_iter, h);
+    }
+    out
+}
+
+fn relax_at(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize, h: f64) -> Relaxed {
     let mut p = packed.clone();
     p.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
-    let w_max = p.springs.iter().map(|s| s.omega0_sq()).fold(0.0, f64::max).sqrt();
-    let h = if w_max > 0.0 { 0.3 * std::f64::consts::PI / w_max } else { 1e-3 };
     let mut solver = Solver::new(Integrator::SymplecticEuler, false, gravity);
     let ke = |p: &Packed| {
         (0..p.particle_count())
@@ -30,19 +44,23 @@ pub fn relax(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize) -> Rela
             .map(|i| p.mass[i] * p.v[i].length_squared())
             .sum::<f64>()
     };
+    let mut before = p.x.clone();
     let mut last = 0.0;
     let mut residual = f64::INFINITY;
     let mut it = 0;
     while it < max_iter {
-        let before = p.x.clone();
+        before.copy_from_slice(&p.x);
         if solver.substep(&mut p, h).is_err() {
             break;
         }
         it += 1;
         let k = ke(&p);
+        if !k.is_finite() {
+            break;
+        }
         if k < last {
             // Past the peak: restart from the previous (lower-energy) positions at rest.
-            p.x = before;
+            p.x.copy_from_slice(&before);
             p.v.iter_mut().for_each(|v| *v = DVec3::ZERO);
             last = 0.0;
         } else {

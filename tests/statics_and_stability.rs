@@ -50,5 +50,23 @@ fn single_spring_thresholds_match_the_oscillator_bounds() {
     assert_eq!(stability::threshold(&p2, Integrator::Harmonic, false, 10.0), None);
     let se2 = stability::threshold(&p2, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
     println!("symplectic Euler at ζ = 2: {se2:.4}");
-    assert!(se2 < 0.3, "{se2}");
+    // Exact bound: ωh < 2(√(ζ²+1) − ζ), i.e. h/h_c < 0.1502 at ζ = 2.
+    let exact = 2.0 * (5.0f64.sqrt() - 2.0) / std::f64::consts::PI;
+    assert!((se2 - exact).abs() < 0.01 * exact, "{se2} vs {exact}");
+}
+
+#[test]
+fn relaxed_cloth_is_a_fixed_point() {
+    // The relaxed 16×16 cloth barely moves under the RK4 reference (an independent integrator).
+    let (scene, strain) = stability::cloth_case(16, 0.0, Start::Equilibrium);
+    assert!(strain > 0.0 && strain < 0.5, "static strain {strain}");
+    let p = pack(&scene);
+    let hc = stability::h_crit(&p);
+    match stability::run(&p, Integrator::Rk4, DVec3::from(scene.gravity), 0.2 * hc, 0.2, 1.0) {
+        stability::Outcome::Bounded { max_strain, .. } => {
+            println!("static strain {strain:.5}, max under RK4 {max_strain:.5}");
+            assert!((max_strain / strain - 1.0).abs() < 1e-3, "{max_strain} vs {strain}");
+        }
+        other => panic!("{other:?}"),
+    }
 }
