@@ -11,11 +11,18 @@ fn substep(c: &mut Criterion) {
     let packed = Packed::gather(&scene.build().world).unwrap();
     let mut group = c.benchmark_group("substep/cloth128");
     group.throughput(Throughput::Elements(packed.springs.len() as u64));
-    for integrator in [Integrator::Harmonic, Integrator::SymplecticEuler, Integrator::ExplicitEuler, Integrator::HarmonicPaper] {
+    for integrator in [
+        Integrator::Harmonic,
+        Integrator::SymplecticEuler,
+        Integrator::ExplicitEuler,
+        Integrator::HarmonicPaper,
+    ] {
         let mut p = packed.clone();
         let mut solver = Solver::new(integrator, false, DVec3::new(0.0, -9.81, 0.0));
         solver.prepare(&p, scene.dt).unwrap();
-        group.bench_function(integrator.name(), |b| b.iter(|| solver.substep(&mut p, scene.dt).unwrap()));
+        group.bench_function(integrator.name(), |b| {
+            b.iter(|| solver.substep(&mut p, scene.dt).unwrap())
+        });
     }
     group.finish();
 }

@@ -51,7 +51,12 @@ pub struct Row {
 }
 
 /// Times `substeps` substeps of each integrator, `repeats` times round-robin, and reports medians.
-pub fn measure(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -> (usize, Vec<Row>) {
+pub fn measure(
+    n: u32,
+    substeps: u32,
+    repeats: u32,
+    integrators: &[Integrator],
+) -> (usize, Vec<Row>) {
     let scene = hanging_cloth(n);
     let packed = Packed::gather(&scene.build().world).expect("generated scene is consistent");
     let h = scene.dt;
@@ -84,7 +89,10 @@ pub fn measure(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) 
         .zip(samples)
         .map(|(&integrator, mut v)| {
             v.sort_by(f64::total_cmp);
-            Row { integrator, rate: v[v.len() / 2] }
+            Row {
+                integrator,
+                rate: v[v.len() / 2],
+            }
         })
         .collect();
     (m, rows)
@@ -94,18 +102,30 @@ pub fn measure(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) 
 pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -> String {
     let (m, rows) = measure(n, substeps, repeats, integrators);
     let threads = rayon::current_num_threads();
-    let reference = rows.iter().find(|r| r.integrator == Integrator::SymplecticEuler).map(|r| r.rate);
+    let reference = rows
+        .iter()
+        .find(|r| r.integrator == Integrator::SymplecticEuler)
+        .map(|r| r.rate);
     let mut out = String::new();
     let _ = writeln!(
         out,
         "cloth {n}×{n}: {} particles, {m} springs; {substeps} substeps × {repeats} repeats (median), {threads} threads\n",
         n * n
     );
-    let _ = writeln!(out, "| integrator | M spring-substeps/s | ns per spring-substep | vs symplectic Euler |");
+    let _ = writeln!(
+        out,
+        "| integrator | M spring-substeps/s | ns per spring-substep | vs symplectic Euler |"
+    );
     let _ = writeln!(out, "|---|---|---|---|");
     for r in &rows {
         let ratio = reference.map_or("-".to_string(), |s| format!("{:.2}×", r.rate / s));
-        let _ = writeln!(out, "| {} | {:.1} | {:.2} | {ratio} |", r.integrator, r.rate / 1e6, 1e9 / r.rate);
+        let _ = writeln!(
+            out,
+            "| {} | {:.1} | {:.2} | {ratio} |",
+            r.integrator,
+            r.rate / 1e6,
+            1e9 / r.rate
+        );
     }
     out
 }

@@ -122,8 +122,12 @@ impl Packed {
             packed.entities.push(e);
             packed.x.push(p.position);
             packed.v.push(if pinned { DVec3::ZERO } else { p.velocity });
-            packed.mass.push(if pinned { f64::INFINITY } else { p.mass });
-            packed.inv_mass.push(if pinned { 0.0 } else { 1.0 / p.mass });
+            packed
+                .mass
+                .push(if pinned { f64::INFINITY } else { p.mass });
+            packed
+                .inv_mass
+                .push(if pinned { 0.0 } else { 1.0 / p.mass });
         }
         packed.index_by_id = index_of;
         let lookup = |spring: Entity, end: Entity| -> Result<u32, SimError> {
@@ -133,15 +137,22 @@ impl Packed {
                 .ok_or(SimError::DanglingSpring { spring, end })
         };
 
-        let mut springs: Vec<(Entity, Spring)> =
-            world.query::<(Entity, &Spring)>().iter().map(|(e, s)| (e, *s)).collect();
+        let mut springs: Vec<(Entity, Spring)> = world
+            .query::<(Entity, &Spring)>()
+            .iter()
+            .map(|(e, s)| (e, *s))
+            .collect();
         springs.sort_unstable_by_key(|(e, _)| e.id());
         let mut out = Vec::with_capacity(springs.len());
         for (e, s) in &springs {
             let (a, b) = (lookup(*e, s.a)?, lookup(*e, s.b)?);
             let (ma, mb) = (packed.mass[a as usize], packed.mass[b as usize]);
             let mu = reduced_mass(ma, mb);
-            let (wa, wb) = if mu.is_finite() { (mu / ma, mu / mb) } else { (0.0, 0.0) };
+            let (wa, wb) = if mu.is_finite() {
+                (mu / ma, mu / mb)
+            } else {
+                (0.0, 0.0)
+            };
             out.push(PackedSpring {
                 a,
                 b,

@@ -38,9 +38,9 @@ pub mod integrate;
 pub mod metrics;
 pub mod scene;
 pub mod schedule;
+mod simulation;
 pub mod stability;
 pub mod statics;
-mod simulation;
 
 pub use components::{Particle, Pin, SceneIndex, Spring};
 pub use error::{Error, SceneError, SimError};
@@ -50,6 +50,8 @@ pub use schedule::{Stage, StepStats};
 pub use simulation::{Diagnostics, SimConfig, Simulation};
 
 pub mod prelude {
-    pub use crate::{Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring, StepStats};
+    pub use crate::{
+        Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring, StepStats,
+    };
     pub use glam::DVec3;
 }

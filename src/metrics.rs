@@ -26,7 +26,8 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
     if n + m < PAR_MIN {
         (0..n).map(particle).sum::<f64>() + (0..m).map(spring).sum::<f64>()
     } else {
-        (0..n).into_par_iter().map(particle).sum::<f64>() + (0..m).into_par_iter().map(spring).sum::<f64>()
+        (0..n).into_par_iter().map(particle).sum::<f64>()
+            + (0..m).into_par_iter().map(spring).sum::<f64>()
     }
 }
 
@@ -34,7 +35,13 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
 pub fn max_strain(packed: &Packed) -> f64 {
     let strain = |k: usize| packed.stretch(k).abs() / packed.springs[k].rest;
     // Unlike f64::max, keeps a NaN so a broken state cannot report a small strain.
-    let max = |a: f64, b: f64| if a.is_nan() || b.is_nan() { f64::NAN } else { a.max(b) };
+    let max = |a: f64, b: f64| {
+        if a.is_nan() || b.is_nan() {
+            f64::NAN
+        } else {
+            a.max(b)
+        }
+    };
     let m = packed.springs.len();
     if m < PAR_MIN {
         (0..m).map(strain).fold(0.0, max)

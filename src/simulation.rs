@@ -221,7 +221,8 @@ impl Simulation {
         Diagnostics {
             energy: metrics::energy(&self.packed, self.config.gravity),
             max_strain: metrics::max_strain(&self.packed),
-            step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h()).map_or(0.0, |r| r.0),
+            step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
+                .map_or(0.0, |r| r.0),
         }
     }
 }

@@ -19,10 +19,19 @@ pub struct Relaxed {
 /// stiffest spring, all velocities zeroed whenever the kinetic energy passes a peak
 /// (kinetic damping). Stops when every particle's net acceleration is below `tol` (m/s²) or after `max_iter` steps.
 pub fn relax(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize) -> Relaxed {
-    let w_max = packed.springs.iter().map(|s| s.omega0_sq()).fold(0.0, f64::max).sqrt();
+    let w_max = packed
+        .springs
+        .iter()
+        .map(|s| s.omega0_sq())
+        .fold(0.0, f64::max)
+        .sqrt();
     // 0.1 h_c is inside symplectic Euler's stable range on chains and cloth (about 0.3);
     // should the network still diverge, halve the step and start again.
-    let mut h = if w_max > 0.0 { 0.1 * std::f64::consts::PI / w_max } else { 1e-3 };
+    let mut h = if w_max > 0.0 {
+        0.1 * std::f64::consts::PI / w_max
+    } else {
+        1e-3
+    };
     let mut out = relax_at(packed, gravity, tol, max_iter, h);
     for _ in 0..6 {
         if out.positions.iter().all(|x| x.is_finite()) {

@@ -3,7 +3,10 @@
 use std::process::Command;
 
 fn harmonic(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_harmonic")).args(args).output().expect("runs")
+    Command::new(env!("CARGO_BIN_EXE_harmonic"))
+        .args(args)
+        .output()
+        .expect("runs")
 }
 
 #[test]
@@ -11,16 +14,41 @@ fn run_prints_a_summary_and_writes_the_trajectory() {
     let dir = std::env::temp_dir().join(format!("harmonic-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("chain.csv");
-    let out = harmonic(&["run", "scenes/chain.ron", "--steps", "20", "--every", "5", "--trajectory", csv.to_str().unwrap()]);
+    let out = harmonic(&[
+        "run",
+        "scenes/chain.ron",
+        "--steps",
+        "20",
+        "--every",
+        "5",
+        "--trajectory",
+        csv.to_str().unwrap(),
+    ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    for needle in ["21 particles, 20 springs", "h/h_c of the stiffest spring", "steps: 20 frame(s), 160 substep(s)", "max strain", "energy: start", "non-finite: none"] {
-        assert!(stdout.contains(needle), "summary lacks {needle:?}:\n{stdout}");
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for needle in [
+        "21 particles, 20 springs",
+        "h/h_c of the stiffest spring",
+        "steps: 20 frame(s), 160 substep(s)",
+        "max strain",
+        "energy: start",
+        "non-finite: none",
+    ] {
+        assert!(
+            stdout.contains(needle),
+            "summary lacks {needle:?}:\n{stdout}"
+        );
     }
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("step,time,particle,x,y,z,vx,vy,vz"));
-    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|f| f.parse().unwrap()).collect()).collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|f| f.parse().unwrap()).collect())
+        .collect();
     // Steps 0, 5, 10, 15, 20, 21 particles each, in scene order.
     assert_eq!(rows.len(), 5 * 21);
     assert_eq!(rows[0][..3], [0.0, 0.0, 0.0]);
@@ -45,26 +73,63 @@ fn run_reports_a_blow_up_with_a_non_zero_exit() {
 
 #[test]
 fn overrides_apply() {
-    let out = harmonic(&["run", "scenes/explicit_pair.ron", "--seconds", "0.1", "--dt", "0.002", "--substeps", "2", "--integrator", "symplectic-euler"]);
+    let out = harmonic(&[
+        "run",
+        "scenes/explicit_pair.ron",
+        "--seconds",
+        "0.1",
+        "--dt",
+        "0.002",
+        "--substeps",
+        "2",
+        "--integrator",
+        "symplectic-euler",
+    ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success());
-    assert!(stdout.contains("integrator: symplectic-euler, dt 0.002 s, 2 substep(s)"), "{stdout}");
-    assert!(stdout.contains("steps: 50 frame(s), 100 substep(s)"), "{stdout}");
-    let bad = harmonic(&["run", "scenes/explicit_pair.ron", "--integrator", "leapfrog"]);
+    assert!(
+        stdout.contains("integrator: symplectic-euler, dt 0.002 s, 2 substep(s)"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("steps: 50 frame(s), 100 substep(s)"),
+        "{stdout}"
+    );
+    let bad = harmonic(&[
+        "run",
+        "scenes/explicit_pair.ron",
+        "--integrator",
+        "leapfrog",
+    ]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown integrator `leapfrog`"));
 }
 
 #[test]
 fn check_locates_errors_and_fails() {
-    let out = harmonic(&["check", "scenes/chain.ron", "tests/bad_scenes/spring_end_missing.ron", "tests/bad_scenes/unknown_field.ron"]);
+    let out = harmonic(&[
+        "check",
+        "scenes/chain.ron",
+        "tests/bad_scenes/spring_end_missing.ron",
+        "tests/bad_scenes/unknown_field.ron",
+    ]);
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("tests/bad_scenes/spring_end_missing.ron: springs[0].b: particle 5 does not exist"), "{stderr}");
-    assert!(stderr.contains("tests/bad_scenes/unknown_field.ron:5:28:"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "tests/bad_scenes/spring_end_missing.ron: springs[0].b: particle 5 does not exist"
+        ),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("tests/bad_scenes/unknown_field.ron:5:28:"),
+        "{stderr}"
+    );
     assert!(stderr.contains("2 of 3 scene(s) invalid"), "{stderr}");
     assert!(String::from_utf8_lossy(&out.stdout).contains("scenes/chain.ron: ok (21 particles)"));
     let missing = harmonic(&["check", "scenes/does_not_exist.ron"]);
     assert_eq!(missing.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&missing.stderr).contains("scenes/does_not_exist.ron: cannot read"));
+    assert!(
+        String::from_utf8_lossy(&missing.stderr).contains("scenes/does_not_exist.ron: cannot read")
+    );
 }

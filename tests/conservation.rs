@@ -11,8 +11,12 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
     for _ in 0..n {
         particles += &format!(
             "(position: ({}, {}, {}), velocity: ({}, {}, {}), mass: {}),",
-            rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0),
-            rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
+            rng.range(-1.0, 1.0),
             rng.range(0.1, 10.0)
         );
     }
@@ -21,8 +25,15 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
         let a = k % n;
         let b = (a + 1 + (rng.next_f64() * (n - 1) as f64) as usize) % n;
         // ζ in the under-damped, near-critical and over-damped regimes (paper: ζ < 0.7 only).
-        let zeta = if integrator == Integrator::HarmonicPaper { rng.range(0.0, 0.6) } else { [0.1, 1.0, 3.0][k % 3] };
-        springs += &format!("(a: {a}, b: {b}, frequency: {}, damping_ratio: {zeta}),", rng.range(0.5, 3.0));
+        let zeta = if integrator == Integrator::HarmonicPaper {
+            rng.range(0.0, 0.6)
+        } else {
+            [0.1, 1.0, 3.0][k % 3]
+        };
+        springs += &format!(
+            "(a: {a}, b: {b}, frequency: {}, damping_ratio: {zeta}),",
+            rng.range(0.5, 3.0)
+        );
     }
     let text = format!(
         "Scene(dt: 0.002, gravity: (0.0, 0.0, 0.0), integrator: \"{integrator}\", particles: [{particles}], springs: [{springs}])"
@@ -33,7 +44,9 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
 fn momentum(sim: &Simulation) -> (DVec3, f64) {
     let p = sim.packed();
     let total = harmonic::metrics::momentum(p);
-    let scale = (0..p.particle_count()).map(|i| p.mass[i] * p.v[i].length()).sum();
+    let scale = (0..p.particle_count())
+        .map(|i| p.mass[i] * p.v[i].length())
+        .sum();
     (total, scale)
 }
 

@@ -18,7 +18,13 @@ fn chain() -> Scene {
 
 fn positions_at_t(integrator: Integrator, exact: bool, steps: u32) -> Vec<DVec3> {
     let mut sim = Simulation::from_scene(&chain()).unwrap();
-    let config = SimConfig { dt: T / steps as f64, substeps: 1, integrator, exact_displacement: exact, ..*sim.config() };
+    let config = SimConfig {
+        dt: T / steps as f64,
+        substeps: 1,
+        integrator,
+        exact_displacement: exact,
+        ..*sim.config()
+    };
     sim.set_config(config).unwrap();
     for _ in 0..steps {
         sim.step().unwrap();
@@ -27,16 +33,27 @@ fn positions_at_t(integrator: Integrator, exact: bool, steps: u32) -> Vec<DVec3>
 }
 
 fn sci(v: &[f64]) -> String {
-    v.iter().map(|e| format!("{e:.3e}")).collect::<Vec<_>>().join(", ")
+    v.iter()
+        .map(|e| format!("{e:.3e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
-    (a.iter().zip(b).map(|(x, y)| (*x - *y).length_squared()).sum::<f64>() / a.len() as f64).sqrt()
+    (a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x - *y).length_squared())
+        .sum::<f64>()
+        / a.len() as f64)
+        .sqrt()
 }
 
 /// Errors at N, 2N, 4N steps and the observed order log2(e(h)/e(h/2)) of the last halving.
 fn order(integrator: Integrator, exact: bool, n: u32, reference: &[DVec3]) -> (Vec<f64>, f64) {
-    let errors: Vec<f64> = [n, 2 * n, 4 * n].iter().map(|&k| rms(&positions_at_t(integrator, exact, k), reference)).collect();
+    let errors: Vec<f64> = [n, 2 * n, 4 * n]
+        .iter()
+        .map(|&k| rms(&positions_at_t(integrator, exact, k), reference))
+        .collect();
     let p = (errors[1] / errors[2]).log2();
     (errors, p)
 }
@@ -44,14 +61,24 @@ fn order(integrator: Integrator, exact: bool, n: u32, reference: &[DVec3]) -> (V
 #[test]
 fn integrators_converge_at_their_order() {
     let sim = Simulation::from_scene(&chain()).unwrap();
-    let hc = std::f64::consts::PI / sim.packed().springs.iter().map(|s| s.omega0_sq()).fold(0.0, f64::max).sqrt();
+    let hc = std::f64::consts::PI
+        / sim
+            .packed()
+            .springs
+            .iter()
+            .map(|s| s.omega0_sq())
+            .fold(0.0, f64::max)
+            .sqrt();
     // Steps for h = 0.1 h_c (first-order methods) and 0.4 h_c (RK4).
     let n_small = (T / (0.1 * hc)).ceil() as u32;
     let n_rk = (T / (0.4 * hc)).ceil() as u32;
     let reference = positions_at_t(Integrator::Rk4, false, 64 * n_small);
     let finer = positions_at_t(Integrator::Rk4, false, 128 * n_small);
     let ref_err = rms(&reference, &finer);
-    println!("reference: RK4 at h = {:.3e} s; halving it moves it by {ref_err:.2e} m", T / (64 * n_small) as f64);
+    println!(
+        "reference: RK4 at h = {:.3e} s; halving it moves it by {ref_err:.2e} m",
+        T / (64 * n_small) as f64
+    );
 
     let cases = [
         (Integrator::ExplicitEuler, false, n_small, 1.0),
@@ -62,14 +89,29 @@ fn integrators_converge_at_their_order() {
     ];
     for (integrator, exact, n, expected) in cases {
         let (errors, p) = order(integrator, exact, n, &reference);
-        println!("{integrator}{}: RMS errors {}, observed order {p:.2} (expected {expected})",
-                 if exact { " (exact displacement)" } else { "" }, sci(&errors));
-        assert!(errors[2] > 100.0 * ref_err, "{integrator}: reference not converged enough to judge");
-        assert!((p - expected).abs() < 0.3 * expected, "{integrator}: observed order {p:.2}, expected {expected}");
+        println!(
+            "{integrator}{}: RMS errors {}, observed order {p:.2} (expected {expected})",
+            if exact { " (exact displacement)" } else { "" },
+            sci(&errors)
+        );
+        assert!(
+            errors[2] > 100.0 * ref_err,
+            "{integrator}: reference not converged enough to judge"
+        );
+        assert!(
+            (p - expected).abs() < 0.3 * expected,
+            "{integrator}: observed order {p:.2}, expected {expected}"
+        );
     }
 
     // The printed paper step is inconsistent: halving h does not reduce its error.
     let (errors, p) = order(Integrator::HarmonicPaper, false, n_small, &reference);
-    println!("harmonic-paper: RMS errors {}, observed order {p:.2} (inconsistent: expected ≈ 0)", sci(&errors));
-    assert!(p.abs() < 0.3 && errors[2] > 1e-2, "harmonic-paper unexpectedly converges: {errors:?}");
+    println!(
+        "harmonic-paper: RMS errors {}, observed order {p:.2} (inconsistent: expected ≈ 0)",
+        sci(&errors)
+    );
+    assert!(
+        p.abs() < 0.3 && errors[2] > 1e-2,
+        "harmonic-paper unexpectedly converges: {errors:?}"
+    );
 }

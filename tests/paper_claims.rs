@@ -16,7 +16,10 @@ fn integer_multiples_of_h_c_give_zero_or_reversing_impulse() {
         let v = sim.velocities();
         let rel = (v[1] - v[0]).x;
         let expected = if n % 2 == 0 { v0 } else { -v0 };
-        assert!((rel - expected).abs() < 1e-9, "n = {n}: relative velocity {rel}, expected {expected}");
+        assert!(
+            (rel - expected).abs() < 1e-9,
+            "n = {n}: relative velocity {rel}, expected {expected}"
+        );
     }
 }
 
@@ -24,7 +27,10 @@ fn integer_multiples_of_h_c_give_zero_or_reversing_impulse() {
 /// 1/2004 at 1:1000), here for a spring stretching (δ̇ ≥ 0, where eq. 12's phase is right).
 #[test]
 fn paper_velocity_change_is_too_small_by_the_printed_factor() {
-    for (ma, mb, factor) in [(1.0, 1.0, 1.0 / 8.0), (1.0, 1000.0, 1000.0 / (2.0 * 1001.0 * 1001.0))] {
+    for (ma, mb, factor) in [
+        (1.0, 1.0, 1.0 / 8.0),
+        (1.0, 1000.0, 1000.0 / (2.0 * 1001.0 * 1001.0)),
+    ] {
         let change = |integrator: &str| {
             let (mut sim, _, _) = pair(ma, mb, 0.0, 0.3, 0.05, 0.2, false, integrator);
             let before = sim.velocities().to_vec();
@@ -32,10 +38,16 @@ fn paper_velocity_change_is_too_small_by_the_printed_factor() {
             // Velocity change of particle b beyond nothing (no gravity).
             (sim.velocities()[1] - before[1]).x
         };
-        let h = pair(ma, mb, 0.0, 0.3, 0.05, 0.2, false, "harmonic").0.config().dt;
+        let h = pair(ma, mb, 0.0, 0.3, 0.05, 0.2, false, "harmonic")
+            .0
+            .config()
+            .dt;
         // Algorithm 1 multiplies the change by h once more.
         let ratio = change("harmonic-paper") / h / change("harmonic");
-        assert!((ratio / factor - 1.0).abs() < 1e-9, "{ma}:{mb}: ratio {ratio}, printed factor {factor}");
+        assert!(
+            (ratio / factor - 1.0).abs() < 1e-9,
+            "{ma}:{mb}: ratio {ratio}, printed factor {factor}"
+        );
     }
 }
 
@@ -49,9 +61,15 @@ fn paper_phase_loses_the_sign_of_the_stretch_rate() {
         sim.step().unwrap();
         (sim.velocities()[1] - before).x
     };
-    let h = pair(1.0, 1.0, 0.0, 0.3, 0.05, -0.2, false, "harmonic").0.config().dt;
+    let h = pair(1.0, 1.0, 0.0, 0.3, 0.05, -0.2, false, "harmonic")
+        .0
+        .config()
+        .dt;
     let ratio = change("harmonic-paper") / h / change("harmonic");
-    assert!((ratio / 0.125 - 1.0).abs() > 0.1, "contracting spring gave the stretching ratio {ratio}");
+    assert!(
+        (ratio / 0.125 - 1.0).abs() > 0.1,
+        "contracting spring gave the stretching ratio {ratio}"
+    );
 }
 
 /// Eq. 27 as printed is NaN for ζ > 0.707: reported as an error, never a NaN step.
@@ -80,10 +98,23 @@ fn paper_damped_change_does_not_vanish_as_h_shrinks() {
         let before = sim.velocities()[1];
         sim.step().unwrap();
         let dv = (sim.velocities()[1] - before).x;
-        if integrator == "harmonic-paper" { dv / sim.config().dt } else { dv }
+        if integrator == "harmonic-paper" {
+            dv / sim.config().dt
+        } else {
+            dv
+        }
     };
-    let (big, small) = (change(1e-2, "harmonic-paper"), change(1e-4, "harmonic-paper"));
-    assert!((small / big - 1.0).abs() < 0.01, "printed φ should stay put as h shrinks 100×: {big} vs {small}");
+    let (big, small) = (
+        change(1e-2, "harmonic-paper"),
+        change(1e-4, "harmonic-paper"),
+    );
+    assert!(
+        (small / big - 1.0).abs() < 0.01,
+        "printed φ should stay put as h shrinks 100×: {big} vs {small}"
+    );
     let (big, small) = (change(1e-2, "harmonic"), change(1e-4, "harmonic"));
-    assert!((small / big - 0.01).abs() < 0.001, "corrected φ must shrink with h: {big} vs {small}");
+    assert!(
+        (small / big - 0.01).abs() < 0.001,
+        "corrected φ must shrink with h: {big} vs {small}"
+    );
 }

@@ -21,7 +21,10 @@ fn ron_files(dir: &Path) -> Vec<PathBuf> {
 #[test]
 fn every_shipped_scene_loads_and_steps() {
     let files = ron_files(Path::new("scenes"));
-    assert!(files.len() >= 8, "expected the shipped scenes, found {files:?}");
+    assert!(
+        files.len() >= 8,
+        "expected the shipped scenes, found {files:?}"
+    );
     for path in files {
         let mut sim = Simulation::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         for _ in 0..5 {
@@ -32,7 +35,11 @@ fn every_shipped_scene_loads_and_steps() {
                 Err(e) => panic!("{}: {e}", path.display()),
             }
         }
-        assert!(sim.positions().iter().all(|x| x.is_finite()), "{}: World holds non-finite state", path.display());
+        assert!(
+            sim.positions().iter().all(|x| x.is_finite()),
+            "{}: World holds non-finite state",
+            path.display()
+        );
     }
 }
 
@@ -48,11 +55,21 @@ fn bad_scenes_give_their_expected_located_errors() {
             .and_then(|l| l.strip_prefix("// expect: "))
             .unwrap_or_else(|| panic!("{}: first line must be `// expect: …`", path.display()));
         let err = match Scene::load(&path) {
-            Ok(_) => panic!("{}: loaded, expected an error containing {expect:?}", path.display()),
+            Ok(_) => panic!(
+                "{}: loaded, expected an error containing {expect:?}",
+                path.display()
+            ),
             Err(e) => e.to_string(),
         };
         println!("{err}");
-        assert!(err.contains(expect), "{}: error {err:?} does not contain {expect:?}", path.display());
-        assert!(err.starts_with(&path.display().to_string()), "error must name the file: {err}");
+        assert!(
+            err.contains(expect),
+            "{}: error {err:?} does not contain {expect:?}",
+            path.display()
+        );
+        assert!(
+            err.starts_with(&path.display().to_string()),
+            "error must name the file: {err}"
+        );
     }
 }

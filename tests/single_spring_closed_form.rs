@@ -25,7 +25,9 @@ fn harmonic_with_exact_displacement_tracks_the_closed_form() {
                     );
                     worst = worst.max((d - dr).abs() / (dr.abs() + 1e-12));
                 }
-                println!("masses {ma}:{mb} ζ {zeta} h/h_c {ratio}: worst relative δ error {worst:.2e}");
+                println!(
+                    "masses {ma}:{mb} ζ {zeta} h/h_c {ratio}: worst relative δ error {worst:.2e}"
+                );
             }
         }
     }
@@ -42,6 +44,9 @@ fn isolated_undamped_spring_never_gains_energy() {
             max_e = max_e.max(sim.diagnostics().energy);
         }
         println!("h/h_c {ratio}: E0 {e0:.12e}, max E {max_e:.12e}");
-        assert!(max_e <= e0 * (1.0 + 1e-9), "h/h_c {ratio}: energy grew from {e0} to {max_e}");
+        assert!(
+            max_e <= e0 * (1.0 + 1e-9),
+            "h/h_c {ratio}: energy grew from {e0} to {max_e}"
+        );
     }
 }

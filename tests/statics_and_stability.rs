@@ -17,8 +17,16 @@ fn relaxation_finds_the_hanging_chain_closed_form() {
     let p = pack(&from_rest);
     let relaxed = statics::relax(&p, DVec3::from(from_rest.gravity), 1e-10, 2_000_000);
     let q = pack(&exact);
-    let err = relaxed.positions.iter().zip(&q.x).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
-    println!("relaxed in {} iterations, max |Δx| {err:.2e} m", relaxed.iterations);
+    let err = relaxed
+        .positions
+        .iter()
+        .zip(&q.x)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    println!(
+        "relaxed in {} iterations, max |Δx| {err:.2e} m",
+        relaxed.iterations
+    );
     assert!(err < 1e-8, "relaxed chain is {err} m from the closed form");
     assert!((statics::static_strain(&p, &relaxed) - strain).abs() < 1e-6);
 }
@@ -29,9 +37,19 @@ fn equilibrium_start_stays_put_with_rk4() {
     let (scene, strain) = stability::chain(20, 0.0, Start::Equilibrium);
     let p = pack(&scene);
     let hc = stability::h_crit(&p);
-    let o = stability::run(&p, Integrator::Rk4, DVec3::from(scene.gravity), 0.2 * hc, 1.0, 1.0);
+    let o = stability::run(
+        &p,
+        Integrator::Rk4,
+        DVec3::from(scene.gravity),
+        0.2 * hc,
+        1.0,
+        1.0,
+    );
     match o {
-        stability::Outcome::Bounded { max_strain, .. } => assert!((max_strain / strain - 1.0).abs() < 1e-6, "{max_strain} vs {strain}"),
+        stability::Outcome::Bounded { max_strain, .. } => assert!(
+            (max_strain / strain - 1.0).abs() < 1e-6,
+            "{max_strain} vs {strain}"
+        ),
         other => panic!("{other:?}"),
     }
 }
@@ -41,13 +59,22 @@ fn single_spring_thresholds_match_the_oscillator_bounds() {
     // Symplectic Euler on an undamped oscillator is stable iff ω h ≤ 2: h/h_c ≤ 2/π.
     let p = pack(&stability::pair(1.0, 0.0, false, Start::Equilibrium).0);
     let se = stability::threshold(&p, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
-    println!("symplectic Euler: {se:.4} (exact {:.4})", 2.0 / std::f64::consts::PI);
+    println!(
+        "symplectic Euler: {se:.4} (exact {:.4})",
+        2.0 / std::f64::consts::PI
+    );
     assert!((se - 2.0 / std::f64::consts::PI).abs() < 0.01, "{se}");
     // Harmonic with exact displacement integrates an isolated spring exactly: never unstable.
-    assert_eq!(stability::threshold(&p, Integrator::Harmonic, true, 10.0), None);
+    assert_eq!(
+        stability::threshold(&p, Integrator::Harmonic, true, 10.0),
+        None
+    );
     // Over-damped: the closed form is stable at any step (MATH: ∞), symplectic Euler is not.
     let p2 = pack(&stability::pair(1.0, 2.0, false, Start::Equilibrium).0);
-    assert_eq!(stability::threshold(&p2, Integrator::Harmonic, false, 10.0), None);
+    assert_eq!(
+        stability::threshold(&p2, Integrator::Harmonic, false, 10.0),
+        None
+    );
     let se2 = stability::threshold(&p2, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
     println!("symplectic Euler at ζ = 2: {se2:.4}");
     // Exact bound: ωh < 2(√(ζ²+1) − ζ), i.e. h/h_c < 0.1502 at ζ = 2.
@@ -62,10 +89,20 @@ fn relaxed_cloth_is_a_fixed_point() {
     assert!(strain > 0.0 && strain < 0.5, "static strain {strain}");
     let p = pack(&scene);
     let hc = stability::h_crit(&p);
-    match stability::run(&p, Integrator::Rk4, DVec3::from(scene.gravity), 0.2 * hc, 0.2, 1.0) {
+    match stability::run(
+        &p,
+        Integrator::Rk4,
+        DVec3::from(scene.gravity),
+        0.2 * hc,
+        0.2,
+        1.0,
+    ) {
         stability::Outcome::Bounded { max_strain, .. } => {
             println!("static strain {strain:.5}, max under RK4 {max_strain:.5}");
-            assert!((max_strain / strain - 1.0).abs() < 1e-3, "{max_strain} vs {strain}");
+            assert!(
+                (max_strain / strain - 1.0).abs() < 1e-3,
+                "{max_strain} vs {strain}"
+            );
         }
         other => panic!("{other:?}"),
     }

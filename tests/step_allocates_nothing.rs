@@ -59,6 +59,9 @@ fn stepping_allocates_nothing() {
         let parallel = allocations_per_frame(72, integrator, exact);
         println!("{integrator} (exact {exact}): {serial} allocations per frame serial, {parallel} parallel");
         assert_eq!(serial, 0.0, "{integrator} allocates in the step");
-        assert!(parallel <= 1.0 / 63.0 + 1e-9, "{integrator} allocates {parallel} times per frame");
+        assert!(
+            parallel <= 1.0 / 63.0 + 1e-9,
+            "{integrator} allocates {parallel} times per frame"
+        );
     }
 }

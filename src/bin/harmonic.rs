@@ -10,7 +10,11 @@ use clap::{Parser, Subcommand};
 use harmonic::{bench, stability, Integrator, Scene, SimError, Simulation};
 
 #[derive(Parser)]
-#[command(name = "harmonic", version, about = "Mass-spring simulation with a closed-form spring step")]
+#[command(
+    name = "harmonic",
+    version,
+    about = "Mass-spring simulation with a closed-form spring step"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -92,7 +96,9 @@ fn main() -> ExitCode {
             let report = stability::report(&stability::Options { seconds, full });
             print!("{report}");
             match out {
-                Some(path) => std::fs::write(&path, &report).map_err(|e| format!("{}: {e}", path.display())),
+                Some(path) => {
+                    std::fs::write(&path, &report).map_err(|e| format!("{}: {e}", path.display()))
+                }
                 None => Ok(()),
             }
         }
@@ -116,16 +122,26 @@ fn main() -> ExitCode {
 
 fn parse_integrators(names: &[String]) -> Result<Vec<Integrator>, String> {
     if names.is_empty() {
-        return Ok(Integrator::ALL.into_iter().filter(|i| *i != Integrator::Rk4).collect());
+        return Ok(Integrator::ALL
+            .into_iter()
+            .filter(|i| *i != Integrator::Rk4)
+            .collect());
     }
-    names.iter().map(|n| n.parse::<Integrator>().map_err(|e| e.to_string())).collect()
+    names
+        .iter()
+        .map(|n| n.parse::<Integrator>().map_err(|e| e.to_string()))
+        .collect()
 }
 
 fn check(paths: &[PathBuf]) -> Result<(), String> {
     let mut bad = 0;
     for path in paths {
         match Scene::load(path) {
-            Ok(scene) => println!("{}: ok ({} particles)", path.display(), scene.particle_count()),
+            Ok(scene) => println!(
+                "{}: ok ({} particles)",
+                path.display(),
+                scene.particle_count()
+            ),
             Err(e) => {
                 eprintln!("{e}");
                 bad += 1;
@@ -178,11 +194,18 @@ fn run(args: RunArgs) -> Result<(), String> {
     let (n, m) = (packed.particle_count(), packed.springs.len());
     let start = sim.diagnostics();
     let ratio = harmonic::metrics::worst_step_ratio(packed, config.h());
-    println!("scene: {} ({n} particles, {m} springs)", args.scene.display());
+    println!(
+        "scene: {} ({n} particles, {m} springs)",
+        args.scene.display()
+    );
     println!(
         "integrator: {}{}, dt {} s, {} substep(s), h = {:.4e} s",
         config.integrator,
-        if config.exact_displacement { " (exact displacement)" } else { "" },
+        if config.exact_displacement {
+            " (exact displacement)"
+        } else {
+            ""
+        },
         config.dt,
         config.substeps,
         config.h()
@@ -220,8 +243,14 @@ fn run(args: RunArgs) -> Result<(), String> {
         done as f64 / wall,
         (m as f64 * substeps as f64) / wall / 1e6
     );
-    println!("max strain: {:.4} % (largest |δ|/l0 over the run)", 100.0 * max_strain);
-    println!("energy: start {:.6e} J, end {:.6e} J", start.energy, end.energy);
+    println!(
+        "max strain: {:.4} % (largest |δ|/l0 over the run)",
+        100.0 * max_strain
+    );
+    println!(
+        "energy: start {:.6e} J, end {:.6e} J",
+        start.energy, end.energy
+    );
     match failure {
         None => {
             println!("non-finite: none");
@@ -237,7 +266,11 @@ fn run(args: RunArgs) -> Result<(), String> {
 fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Result<()> {
     let t = step as f64 * sim.config().dt;
     for (i, (x, v)) in sim.positions().iter().zip(sim.velocities()).enumerate() {
-        writeln!(w, "{step},{t},{i},{},{},{},{},{},{}", x.x, x.y, x.z, v.x, v.y, v.z)?;
+        writeln!(
+            w,
+            "{step},{t},{i},{},{},{},{},{},{}",
+            x.x, x.y, x.z, v.x, v.y, v.z
+        )?;
     }
     Ok(())
 }

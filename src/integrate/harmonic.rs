@@ -138,7 +138,10 @@ mod tests {
             (d, v)
         } else {
             let e = (-a * t).exp();
-            (e * (d0 + (v0 + a * d0) * t), e * (v0 - (w2 * d0 + a * v0) * t))
+            (
+                e * (d0 + (v0 + a * d0) * t),
+                e * (v0 - (w2 * d0 + a * v0) * t),
+            )
         }
     }
 
@@ -153,22 +156,47 @@ mod tests {
                 let (dr, vr) = textbook(w2, a, t, 0.3, -2.0);
                 let scale_d = 0.3 + 2.0 * t;
                 let scale_v = 2.0 + w2 * 0.3 * t;
-                assert!((d - dr).abs() <= 1e-12 * scale_d, "zeta {zeta} t {t}: {d} vs {dr}");
-                assert!((v - vr).abs() <= 1e-12 * scale_v, "zeta {zeta} t {t}: {v} vs {vr}");
+                assert!(
+                    (d - dr).abs() <= 1e-12 * scale_d,
+                    "zeta {zeta} t {t}: {d} vs {dr}"
+                );
+                assert!(
+                    (v - vr).abs() <= 1e-12 * scale_v,
+                    "zeta {zeta} t {t}: {v} vs {vr}"
+                );
             }
         }
     }
 
     #[test]
-    fn continuous_across_critical_damping() {
-        let (w2, h) = (1.0e4, 0.01);
+    fn continuous_across_critical_damping_and_the_series_boundary() {
+        let (w2, h): (f64, f64) = (1.0e4, 0.01);
         let w = w2.sqrt();
-        let at = |zeta: f64| harmonic(w2, zeta * w, h);
+        let close = |x: Linear, y: Linear, tol: f64| {
+            [(x.p, y.p), (x.q, y.q), (x.r, y.r), (x.s, y.s)]
+                .iter()
+                .all(|(a, b)| (a - b).abs() <= tol * (a.abs() + b.abs() + 1e-300))
+        };
+        // Across ζ = 1 the coefficients move by O(ζ − 1).
         for eps in [1e-12, 1e-8, 1e-4] {
-            let (lo, hi) = (at(1.0 - eps), at(1.0 + eps));
-            for (x, y) in [(lo.p, hi.p), (lo.q, hi.q), (lo.r, hi.r), (lo.s, hi.s)] {
-                assert!((x - y).abs() <= 1e-6 * (x.abs() + 1e-3), "jump {x} vs {y} at eps {eps}");
-            }
+            let (lo, hi) = (
+                harmonic(w2, (1.0 - eps) * w, h),
+                harmonic(w2, (1.0 + eps) * w, h),
+            );
+            assert!(
+                close(lo, hi, 10.0 * eps),
+                "jump across ζ = 1 at eps {eps}: {lo:?} vs {hi:?}"
+            );
+        }
+        // Where the series hands over to cos/sin (β²h² = 0.25) and to cosh/sinh (−0.25).
+        for side in [1.0, -1.0] {
+            let alpha_at = |z: f64| (w2 - z / (h * h)).sqrt();
+            let z = side * SERIES_LIMIT;
+            let (a, b) = (
+                harmonic(w2, alpha_at(z * (1.0 - 1e-12)), h),
+                harmonic(w2, alpha_at(z * (1.0 + 1e-12)), h),
+            );
+            assert!(close(a, b, 1e-11), "jump at z = {z}: {a:?} vs {b:?}");
         }
     }
 
@@ -190,9 +218,18 @@ mod tests {
         // q ≈ −2αh − ω0²h²/... must not be round-off when h is tiny.
         let (w2, a, h) = (1.0e6, 50.0, 1.0e-9);
         let l = harmonic(w2, a, h);
-        let q_expected = -2.0 * a * h;
-        assert!((l.q - q_expected).abs() < 1e-6 * q_expected.abs(), "{} vs {q_expected}", l.q);
+        // q = −2αh + (2α² − ω0²/2) h² + O(h³)
+        let q_expected = -2.0 * a * h + (2.0 * a * a - 0.5 * w2) * h * h;
+        assert!(
+            (l.q - q_expected).abs() < 1e-9 * q_expected.abs(),
+            "{} vs {q_expected}",
+            l.q
+        );
         let s_expected = -a * h * h; // ES − h ≈ −αh² to leading order
-        assert!((l.s - s_expected).abs() < 1e-3 * s_expected.abs(), "{} vs {s_expected}", l.s);
+        assert!(
+            (l.s - s_expected).abs() < 1e-3 * s_expected.abs(),
+            "{} vs {s_expected}",
+            l.s
+        );
     }
 }

@@ -9,15 +9,16 @@ use std::str::FromStr;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::buffers::{PackedSpring, Packed};
+use crate::buffers::{Packed, PackedSpring};
 use crate::error::SimError;
 use harmonic::Linear;
 use paper::PaperSpring;
 
 /// The CPU integrators, all over the same packed buffers.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Integrator {
     /// The corrected closed-form spring step, summed per particle (Jacobi).
+    #[default]
     Harmonic,
     /// The paper's equations as printed, for comparison only.
     HarmonicPaper,
@@ -46,12 +47,6 @@ impl Integrator {
             Integrator::ExplicitEuler => "explicit-euler",
             Integrator::Rk4 => "rk4",
         }
-    }
-}
-
-impl Default for Integrator {
-    fn default() -> Self {
-        Integrator::Harmonic
     }
 }
 
@@ -150,15 +145,24 @@ impl Solver {
         self.rk.clear();
         match self.integrator {
             Integrator::Harmonic => self.lin.extend(
-                packed.springs.iter().map(|s| harmonic::harmonic(s.omega0_sq(), s.alpha(), h)),
+                packed
+                    .springs
+                    .iter()
+                    .map(|s| harmonic::harmonic(s.omega0_sq(), s.alpha(), h)),
             ),
             Integrator::SymplecticEuler | Integrator::ExplicitEuler => self.lin.extend(
-                packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), h)),
+                packed
+                    .springs
+                    .iter()
+                    .map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), h)),
             ),
             Integrator::Rk4 => {
                 // Acceleration coefficients (h = 1); 10 state-sized scratch vectors.
                 self.lin.extend(
-                    packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)),
+                    packed
+                        .springs
+                        .iter()
+                        .map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)),
                 );
                 self.rk = vec![vec![DVec3::ZERO; n]; 10];
             }
@@ -177,8 +181,12 @@ impl Solver {
                     }
                     let ma = packed.mass[s.a as usize];
                     let mb = packed.mass[s.b as usize];
-                    let p = PaperSpring::new(s.stiffness, s.damping, ma, mb)
-                        .map_err(|e| SimError::PaperUndefined { spring: k, zeta: e.zeta })?;
+                    let p = PaperSpring::new(s.stiffness, s.damping, ma, mb).map_err(|e| {
+                        SimError::PaperUndefined {
+                            spring: k,
+                            zeta: e.zeta,
+                        }
+                    })?;
                     self.paper.push(p);
                 }
             }
@@ -195,12 +203,30 @@ impl Solver {
             Integrator::Harmonic => {
                 let disp = self.exact_displacement;
                 let sdx = if disp { Some(&mut self.sdx[..]) } else { None };
-                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.lin), &mut self.sdv, sdx);
-                let update = if disp { Update::Exact } else { Update::VelocityFirst };
+                spring_pass(
+                    &packed.springs,
+                    &packed.x,
+                    &packed.v,
+                    Law::Linear(&self.lin),
+                    &mut self.sdv,
+                    sdx,
+                );
+                let update = if disp {
+                    Update::Exact
+                } else {
+                    Update::VelocityFirst
+                };
                 particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
             }
             Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
-                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.lin), &mut self.sdv, None);
+                spring_pass(
+                    &packed.springs,
+                    &packed.x,
+                    &packed.v,
+                    Law::Linear(&self.lin),
+                    &mut self.sdv,
+                    None,
+                );
                 let update = if self.integrator == Integrator::SymplecticEuler {
                     Update::VelocityFirst
                 } else {
@@ -209,7 +235,14 @@ impl Solver {
                 particle_pass(packed, &self.sdv, &[], g, h, update);
             }
             Integrator::HarmonicPaper => {
-                spring_pass(&packed.springs, &packed.x, &packed.v, Law::Paper(&self.paper, h), &mut self.sdv, None);
+                spring_pass(
+                    &packed.springs,
+                    &packed.x,
+                    &packed.v,
+                    Law::Paper(&self.paper, h),
+                    &mut self.sdv,
+                    None,
+                );
                 particle_pass(packed, &self.sdv, &[], g, h, Update::PaperAlgorithm1);
             }
             Integrator::Rk4 => self.rk4(packed, h),
@@ -225,7 +258,10 @@ impl Solver {
         x0.copy_from_slice(&packed.x);
         v0.copy_from_slice(&packed.v);
         // Stage k: (xt, vt) is the stage state; (ax, av) its derivative; (sx, sv) the weighted sum.
-        for (stage, (c, w)) in [(0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0)].into_iter().enumerate() {
+        for (stage, (c, w)) in [(0.0, 1.0), (0.5, 2.0), (0.5, 2.0), (1.0, 1.0)]
+            .into_iter()
+            .enumerate()
+        {
             if stage == 0 {
                 xt.copy_from_slice(x0);
                 vt.copy_from_slice(v0);
@@ -235,7 +271,14 @@ impl Solver {
                     vt[i] = v0[i] + c * h * av[i];
                 }
             }
-            spring_pass(&packed.springs, xt, vt, Law::Linear(&self.lin), &mut self.sdv, None);
+            spring_pass(
+                &packed.springs,
+                xt,
+                vt,
+                Law::Linear(&self.lin),
+                &mut self.sdv,
+                None,
+            );
             acceleration(packed, &self.sdv, g, bv);
             bx.copy_from_slice(vt);
             for i in 0..x0.len() {
@@ -261,7 +304,13 @@ impl Solver {
 
 /// One spring's change of relative velocity `φ n` (and displacement `D n`) from the state.
 #[inline(always)]
-fn spring_update(springs: &[PackedSpring], x: &[DVec3], v: &[DVec3], law: Law<'_>, k: usize) -> (DVec3, f64, f64) {
+fn spring_update(
+    springs: &[PackedSpring],
+    x: &[DVec3],
+    v: &[DVec3],
+    law: Law<'_>,
+    k: usize,
+) -> (DVec3, f64, f64) {
     let s = &springs[k];
     let (a, b) = (s.a as usize, s.b as usize);
     let d = x[b] - x[a];
@@ -272,7 +321,11 @@ fn spring_update(springs: &[PackedSpring], x: &[DVec3], v: &[DVec3], law: Law<'_
     match law {
         Law::Linear(lin) => {
             let l = &lin[k];
-            (n, l.p * delta + l.q * delta_dot, l.r * delta + l.s * delta_dot)
+            (
+                n,
+                l.p * delta + l.q * delta_dot,
+                l.r * delta + l.s * delta_dot,
+            )
         }
         Law::Paper(paper, h) => (n, paper[k].phi(delta, delta_dot, h), 0.0),
     }
@@ -297,7 +350,10 @@ fn spring_pass(
             if m < PAR_MIN {
                 sdv.iter_mut().enumerate().for_each(body);
             } else {
-                sdv.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+                sdv.par_iter_mut()
+                    .enumerate()
+                    .with_min_len(PAR_CHUNK)
+                    .for_each(body);
             }
         }
         Some(sdx) => {
@@ -307,7 +363,10 @@ fn spring_pass(
                 *dx = disp * n;
             };
             if m < PAR_MIN {
-                sdv.iter_mut().zip(sdx.iter_mut()).enumerate().for_each(body);
+                sdv.iter_mut()
+                    .zip(sdx.iter_mut())
+                    .enumerate()
+                    .for_each(body);
             } else {
                 sdv.par_iter_mut()
                     .zip(sdx.par_iter_mut())
@@ -320,8 +379,21 @@ fn spring_pass(
 }
 
 /// Pass 2: each particle gathers its springs' changes and moves.
-fn particle_pass(packed: &mut Packed, sdv: &[DVec3], sdx: &[DVec3], g: DVec3, h: f64, update: Update) {
-    let Packed { x, v, inv_mass, incidence, .. } = packed;
+fn particle_pass(
+    packed: &mut Packed,
+    sdv: &[DVec3],
+    sdx: &[DVec3],
+    g: DVec3,
+    h: f64,
+    update: Update,
+) {
+    let Packed {
+        x,
+        v,
+        inv_mass,
+        incidence,
+        ..
+    } = packed;
     let (inv_mass, inc) = (&inv_mass[..], &*incidence);
     let body = |(i, (xi, vi)): (usize, (&mut DVec3, &mut DVec3))| {
         if inv_mass[i] == 0.0 {
@@ -361,11 +433,18 @@ fn particle_pass(packed: &mut Packed, sdv: &[DVec3], sdx: &[DVec3], g: DVec3, h:
 /// Accelerations from per-spring relative accelerations (RK4's derivative).
 fn acceleration(packed: &Packed, sdv: &[DVec3], g: DVec3, out: &mut [DVec3]) {
     let body = |(i, a): (usize, &mut DVec3)| {
-        *a = if packed.inv_mass[i] == 0.0 { DVec3::ZERO } else { packed.incidence.sum(sdv, i) + g };
+        *a = if packed.inv_mass[i] == 0.0 {
+            DVec3::ZERO
+        } else {
+            packed.incidence.sum(sdv, i) + g
+        };
     };
     if out.len() < PAR_MIN {
         out.iter_mut().enumerate().for_each(body);
     } else {
-        out.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+        out.par_iter_mut()
+            .enumerate()
+            .with_min_len(PAR_CHUNK)
+            .for_each(body);
     }
 }

@@ -39,7 +39,11 @@ struct Builder {
 
 impl Builder {
     fn particle(&mut self, position: DVec3, velocity: DVec3, mass: f64, pinned: bool) -> Entity {
-        let p = Particle { position, velocity, mass };
+        let p = Particle {
+            position,
+            velocity,
+            mass,
+        };
         let idx = SceneIndex(self.next);
         self.next += 1;
         if pinned {
@@ -49,9 +53,22 @@ impl Builder {
         }
     }
 
-    fn spring(&mut self, a: Entity, b: Entity, spec: &SpringSpec, mass: (f64, f64), rest_length: f64) {
+    fn spring(
+        &mut self,
+        a: Entity,
+        b: Entity,
+        spec: &SpringSpec,
+        mass: (f64, f64),
+        rest_length: f64,
+    ) {
         let (stiffness, damping) = spec.resolve(mass.0, mass.1);
-        self.world.spawn((Spring { a, b, rest_length, stiffness, damping },));
+        self.world.spawn((Spring {
+            a,
+            b,
+            rest_length,
+            stiffness,
+            damping,
+        },));
     }
 
     fn cloth(&mut self, c: &Cloth) {
@@ -87,7 +104,10 @@ impl Builder {
         }
         let at = |col: usize, row: usize| ids[row * cols + col];
         let pos = |col: usize, row: usize| origin + u * (col as f64 * du) + v * (row as f64 * dv);
-        let link = |b: &mut Builder, spec: &SpringSpec, (c0, r0): (usize, usize), (c1, r1): (usize, usize)| {
+        let link = |b: &mut Builder,
+                    spec: &SpringSpec,
+                    (c0, r0): (usize, usize),
+                    (c1, r1): (usize, usize)| {
             let rest = (pos(c1, r1) - pos(c0, r0)).length();
             b.spring(at(c0, r0), at(c1, r1), spec, (m, m), rest);
         };
@@ -129,11 +149,23 @@ impl Builder {
             })
             .collect();
         for i in 0..n - 1 {
-            self.spring(ids[i], ids[i + 1], &r.spring, (m, m), (pos(i + 1) - pos(i)).length());
+            self.spring(
+                ids[i],
+                ids[i + 1],
+                &r.spring,
+                (m, m),
+                (pos(i + 1) - pos(i)).length(),
+            );
         }
         if let Some(bend) = &r.bend {
             for i in 0..n.saturating_sub(2) {
-                self.spring(ids[i], ids[i + 2], bend, (m, m), (pos(i + 2) - pos(i)).length());
+                self.spring(
+                    ids[i],
+                    ids[i + 2],
+                    bend,
+                    (m, m),
+                    (pos(i + 2) - pos(i)).length(),
+                );
             }
         }
     }

@@ -213,7 +213,8 @@ impl Scene {
     /// Parses and validates scene text; `path` only names the source in errors.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Scene, SceneError> {
         let path: PathBuf = path.as_ref().to_path_buf();
-        let options = ron::Options::default().with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
+        let options = ron::Options::default()
+            .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
         let scene: Scene = options.from_str(text).map_err(|e| SceneError::Parse {
             path: path.clone(),
             line: e.span.start.line,
@@ -230,8 +231,13 @@ impl Scene {
 
     /// Number of particles the scene builds (saturating, so huge generators can be refused).
     pub fn particle_count(&self) -> u64 {
-        let cloth = self.cloths.iter().map(|c| c.resolution.0 as u64 * c.resolution.1 as u64);
+        let cloth = self
+            .cloths
+            .iter()
+            .map(|c| c.resolution.0 as u64 * c.resolution.1 as u64);
         let rope = self.ropes.iter().map(|r| r.particles as u64);
-        cloth.chain(rope).fold(self.particles.len() as u64, u64::saturating_add)
+        cloth
+            .chain(rope)
+            .fold(self.particles.len() as u64, u64::saturating_add)
     }
 }

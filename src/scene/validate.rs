@@ -1,6 +1,6 @@
 //! Semantic checks; each problem names its entry.
 
-use super::{Anchor, Scene, SpringSpec, V3, MAX_PARTICLES};
+use super::{Anchor, Scene, SpringSpec, MAX_PARTICLES, V3};
 use crate::error::Issue;
 use crate::integrate::Integrator;
 
@@ -56,7 +56,10 @@ impl Scene {
         if let Some(name) = &self.integrator {
             if name.parse::<Integrator>().is_err() {
                 let known: Vec<_> = Integrator::ALL.iter().map(|i| i.name()).collect();
-                is.push("integrator", format!("unknown `{name}` (known: {})", known.join(", ")));
+                is.push(
+                    "integrator",
+                    format!("unknown `{name}` (known: {})", known.join(", ")),
+                );
             }
         }
         if let Some(t) = self.seconds {
@@ -73,7 +76,10 @@ impl Scene {
             let mut ends_ok = true;
             for (end, idx) in [("a", s.a), ("b", s.b)] {
                 if idx >= n {
-                    is.push(format!("{at}.{end}"), format!("particle {idx} does not exist ({n} particles)"));
+                    is.push(
+                        format!("{at}.{end}"),
+                        format!("particle {idx} does not exist ({n} particles)"),
+                    );
                     ends_ok = false;
                 }
             }
@@ -107,7 +113,10 @@ impl Scene {
             is.positive(format!("{at}.mass"), c.mass);
             let (cols, rows) = c.resolution;
             if cols < 2 || rows < 2 {
-                is.push(format!("{at}.resolution"), format!("needs ≥ 2 particles each way, got {cols}×{rows}"));
+                is.push(
+                    format!("{at}.resolution"),
+                    format!("needs ≥ 2 particles each way, got {cols}×{rows}"),
+                );
             }
             is.spec(&format!("{at}.structural"), &c.structural);
             if let Some(s) = &c.shear {
@@ -116,7 +125,10 @@ impl Scene {
             if let Some(s) = &c.bend {
                 is.spec(&format!("{at}.bend"), s);
                 if cols < 3 && rows < 3 {
-                    is.push(format!("{at}.bend"), "bend springs need ≥ 3 particles along a row or column");
+                    is.push(
+                        format!("{at}.bend"),
+                        "bend springs need ≥ 3 particles along a row or column",
+                    );
                 }
             }
             for (j, p) in c.pins.iter().enumerate() {
@@ -136,7 +148,10 @@ impl Scene {
             is.finite(format!("{at}.end"), r.end);
             is.positive(format!("{at}.mass"), r.mass);
             if r.particles < 2 {
-                is.push(format!("{at}.particles"), format!("needs ≥ 2, got {}", r.particles));
+                is.push(
+                    format!("{at}.particles"),
+                    format!("needs ≥ 2, got {}", r.particles),
+                );
             }
             if r.start == r.end {
                 is.push(&at, "start and end coincide: zero-length segments");
@@ -148,7 +163,10 @@ impl Scene {
         }
         let total = self.particle_count();
         if total > MAX_PARTICLES {
-            is.push("scene", format!("asks for {total} particles; the limit is {MAX_PARTICLES}"));
+            is.push(
+                "scene",
+                format!("asks for {total} particles; the limit is {MAX_PARTICLES}"),
+            );
         }
         is.0
     }

@@ -5,7 +5,17 @@ use harmonic::prelude::*;
 
 /// Two particles on the x axis joined by one spring (κ, ζ) with masses `ma`, `mb`, no gravity,
 /// stretched by `d0` and stretching at `v0`; stepped at `h = ratio · h_c`.
-pub fn pair(ma: f64, mb: f64, zeta: f64, ratio: f64, d0: f64, v0: f64, exact: bool, integrator: &str) -> (Simulation, f64, f64) {
+#[allow(clippy::too_many_arguments)]
+pub fn pair(
+    ma: f64,
+    mb: f64,
+    zeta: f64,
+    ratio: f64,
+    d0: f64,
+    v0: f64,
+    exact: bool,
+    integrator: &str,
+) -> (Simulation, f64, f64) {
     let k = 100.0;
     let mu = ma * mb / (ma + mb);
     let w0 = (k / mu).sqrt();
@@ -22,7 +32,11 @@ pub fn pair(ma: f64, mb: f64, zeta: f64, ratio: f64, d0: f64, v0: f64, exact: bo
           springs: [(a: 0, b: 1, stiffness: {k:e}, damping: {c:e}, rest_length: {l0:e})])"
     );
     let scene = Scene::parse(&text, "pair").expect("valid pair scene");
-    (Simulation::from_scene(&scene).expect("builds"), w0, zeta * w0)
+    (
+        Simulation::from_scene(&scene).expect("builds"),
+        w0,
+        zeta * w0,
+    )
 }
 
 /// `(δ, δ̇)` of a spring in a simulation of two particles.
@@ -30,7 +44,10 @@ pub fn stretch(sim: &Simulation) -> (f64, f64) {
     let (x, v) = (sim.positions(), sim.velocities());
     let d = x[1] - x[0];
     let n = d.normalize();
-    (d.length() - sim.packed().springs[0].rest, n.dot(v[1] - v[0]))
+    (
+        d.length() - sim.packed().springs[0].rest,
+        n.dot(v[1] - v[0]),
+    )
 }
 
 /// Textbook solution of `δ̈ + 2αδ̇ + ω0²δ = 0`, written directly in each regime.
@@ -38,11 +55,17 @@ pub fn textbook(w2: f64, a: f64, t: f64, d0: f64, v0: f64) -> (f64, f64) {
     let b2 = w2 - a * a;
     let e = (-a * t).exp();
     if b2.abs() < 1e-12 * w2 {
-        (e * (d0 + (v0 + a * d0) * t), e * (v0 - (w2 * d0 + a * v0) * t))
+        (
+            e * (d0 + (v0 + a * d0) * t),
+            e * (v0 - (w2 * d0 + a * v0) * t),
+        )
     } else if b2 > 0.0 {
         let b = b2.sqrt();
         let (c, s) = ((b * t).cos(), (b * t).sin() / b);
-        (e * (d0 * c + (v0 + a * d0) * s), e * (v0 * c - (w2 * d0 + a * v0) * s))
+        (
+            e * (d0 * c + (v0 + a * d0) * s),
+            e * (v0 * c - (w2 * d0 + a * v0) * s),
+        )
     } else {
         // e^{−αt}cosh(γt) and e^{−αt}sinh(γt)/γ as sums of decaying exponentials.
         let g = (-b2).sqrt();
@@ -69,9 +92,14 @@ impl Rng {
 
 /// Seed from the clock unless `HARMONIC_SEED` is set; printed so a failure can be replayed.
 pub fn seed() -> u64 {
-    let seed = std::env::var("HARMONIC_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or_else(|| {
-        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(1, |d| d.as_nanos() as u64)
-    });
+    let seed = std::env::var("HARMONIC_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(1, |d| d.as_nanos() as u64)
+        });
     eprintln!("seed: {seed} (replay with HARMONIC_SEED={seed})");
     seed
 }
