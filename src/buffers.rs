@@ -76,6 +76,67 @@ impl Incidence {
     }
 }
 
+/// Springs grouped by colour: springs of one colour share no particle, so a colour can be
+/// processed in parallel in Gauss–Seidel order. Springs with both ends pinned are left out.
+#[derive(Clone, Debug, Default)]
+pub struct Colouring {
+    /// `offsets[c]..offsets[c+1]` indexes `springs` for colour `c`.
+    pub offsets: Vec<u32>,
+    pub springs: Vec<u32>,
+}
+
+impl Colouring {
+    pub fn colours(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Greedy edge colouring in spring order (at most 2·max degree − 1 colours).
+    fn build(n: usize, springs: &[PackedSpring]) -> Self {
+        let mut degree = vec![0u32; n];
+        for s in springs {
+            degree[s.a as usize] += 1;
+            degree[s.b as usize] += 1;
+        }
+        let max_deg = degree.iter().copied().max().unwrap_or(0) as usize;
+        let words = (2 * max_deg) / 64 + 1;
+        let mut used = vec![0u64; n * words];
+        let mut colour = vec![u32::MAX; springs.len()];
+        let mut count = Vec::<u32>::new();
+        for (k, s) in springs.iter().enumerate() {
+            if s.wa == 0.0 && s.wb == 0.0 {
+                continue;
+            }
+            let (a, b) = (s.a as usize * words, s.b as usize * words);
+            let c = (0..words)
+                .find_map(|w| {
+                    let free = !(used[a + w] | used[b + w]);
+                    (free != 0).then(|| w * 64 + free.trailing_zeros() as usize)
+                })
+                .expect("2·max degree colours always suffice");
+            used[a + c / 64] |= 1 << (c % 64);
+            used[b + c / 64] |= 1 << (c % 64);
+            colour[k] = c as u32;
+            if count.len() <= c {
+                count.resize(c + 1, 0);
+            }
+            count[c] += 1;
+        }
+        let mut offsets = vec![0u32; count.len() + 1];
+        for c in 0..count.len() {
+            offsets[c + 1] = offsets[c] + count[c];
+        }
+        let mut fill = offsets.clone();
+        let mut order = vec![0u32; offsets[count.len()] as usize];
+        for (k, &c) in colour.iter().enumerate() {
+            if c != u32::MAX {
+                order[fill[c as usize] as usize] = k as u32;
+                fill[c as usize] += 1;
+            }
+        }
+        Colouring { offsets, springs: order }
+    }
+}
+
 /// The packed scene: particle state in scene order, springs, and per-particle incidence (CSR).
 #[derive(Clone, Debug, Default)]
 pub struct Packed {
@@ -88,6 +149,7 @@ pub struct Packed {
     pub inv_mass: Vec<f64>,
     pub springs: Vec<PackedSpring>,
     pub incidence: Incidence,
+    pub colouring: Colouring,
     /// Entity id → packed index (`u32::MAX` where none).
     index_by_id: Vec<u32>,
 }
@@ -166,6 +228,7 @@ impl Packed {
         }
         packed.springs = out;
         packed.build_incidence();
+        packed.colouring = Colouring::build(packed.x.len(), &packed.springs);
         Ok(packed)
     }
 

@@ -51,7 +51,7 @@ fn format_issues(path: &std::path::Path, issues: &[Issue]) -> String {
 /// Why a step could not be taken.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SimError {
-    #[error("unknown integrator `{0}` (known: harmonic, harmonic-paper, symplectic-euler, explicit-euler, rk4)")]
+    #[error("unknown integrator `{0}` (known: {known})", known = known_integrators())]
     UnknownIntegrator(String),
     #[error("time step must be finite and > 0, got {0}")]
     BadStep(f64),
@@ -80,4 +80,8 @@ pub enum Error {
     Scene(#[from] SceneError),
     #[error(transparent)]
     Sim(#[from] SimError),
+}
+
+fn known_integrators() -> String {
+    crate::Integrator::ALL.iter().map(|i| i.name()).collect::<Vec<_>>().join(", ")
 }

@@ -15,10 +15,13 @@ use crate::statics;
 pub const RATIOS: [f64; 8] = [0.25, 0.5, 1.0, 2.0, 2.0625, 4.0, 6.0625, 8.0625];
 
 /// Integrators the suite compares (RK4 is the reference, not a contender).
-pub const CONTENDERS: [Integrator; 4] = [
+pub const CONTENDERS: [Integrator; 7] = [
     Integrator::SymplecticEuler,
     Integrator::ExplicitEuler,
     Integrator::Harmonic,
+    Integrator::HarmonicGs,
+    Integrator::HarmonicForced,
+    Integrator::HarmonicForcedGs,
     Integrator::HarmonicPaper,
 ];
 
@@ -376,40 +379,32 @@ pub fn threshold(packed: &Packed, integrator: Integrator, exact: bool, max: f64)
     None
 }
 
-/// The systems of the numpy study's threshold table, with its figures for symplectic Euler
-/// and the harmonic Jacobi step.
-pub fn threshold_systems() -> Vec<(&'static str, Scene, f64, f64)> {
+/// Figures of the numpy study (MATH.md) for one system: symplectic Euler, harmonic Jacobi,
+/// harmonic forced, harmonic Gauss–Seidel (`INFINITY` for "∞", `NAN` where it gives none).
+pub struct Study {
+    pub name: &'static str,
+    pub scene: Scene,
+    pub symplectic_euler: f64,
+    pub harmonic: f64,
+    pub forced: f64,
+    pub gauss_seidel: f64,
+}
+
+/// The systems of the numpy study's threshold table, with its figures.
+pub fn threshold_systems() -> Vec<Study> {
     let zero_g = |mut s: Scene| {
         s.gravity = [0.0; 3];
         s
     };
+    let inf = f64::INFINITY;
+    let row = |name, scene, se, h, f, gs| Study { name, scene, symplectic_euler: se, harmonic: h, forced: f, gauss_seidel: gs };
     vec![
-        (
-            "1 spring, ζ = 0",
-            pair(1.0, 0.0, false, Start::Equilibrium).0,
-            0.64,
-            0.55,
-        ),
-        (
-            "1 spring, ζ = 2",
-            pair(1.0, 2.0, false, Start::Equilibrium).0,
-            0.2,
-            f64::INFINITY,
-        ),
-        (
-            "chain of 20, ζ = 0",
-            zero_g(chain(20, 0.0, Start::Rest).0),
-            0.45,
-            0.34,
-        ),
-        (
-            "chain of 20, ζ = 0.2",
-            zero_g(chain(20, 0.2, Start::Rest).0),
-            0.34,
-            0.31,
-        ),
-        ("cloth 8×8, ζ = 0", zero_g(cloth(8, 0.0)), 0.30, 0.22),
-        ("cloth 8×8, ζ = 0.2", zero_g(cloth(8, 0.2)), 0.19, 0.17),
+        row("1 spring, ζ = 0", pair(1.0, 0.0, false, Start::Equilibrium).0, 0.64, 0.55, 0.55, 0.55),
+        row("1 spring, ζ = 2", pair(1.0, 2.0, false, Start::Equilibrium).0, 0.2, inf, inf, inf),
+        row("chain of 20, ζ = 0", zero_g(chain(20, 0.0, Start::Rest).0), 0.45, 0.34, 0.37, 0.56),
+        row("chain of 20, ζ = 0.2", zero_g(chain(20, 0.2, Start::Rest).0), 0.34, 0.31, 0.48, 0.65),
+        row("cloth 8×8, ζ = 0", zero_g(cloth(8, 0.0)), 0.30, 0.22, 0.24, 0.46),
+        row("cloth 8×8, ζ = 0.2", zero_g(cloth(8, 0.2)), 0.19, 0.17, 0.24, 0.97),
     ]
 }
 
@@ -457,27 +452,36 @@ pub fn report(opts: &Options) -> String {
         out,
         "h_c = π/ω0 of the stiffest single spring. Scanned in steps of 0.01 up to {max}, then bisected.\n"
     );
-    let _ = writeln!(
-        out,
-        "| system | symplectic Euler | numpy | harmonic (Jacobi) | numpy | harmonic, exact displacement | explicit Euler |"
-    );
-    let _ = writeln!(out, "|---|---|---|---|---|---|---|");
-    for (name, scene, np_se, np_h) in threshold_systems() {
-        let p = pack(&scene);
-        let se = threshold(&p, Integrator::SymplecticEuler, false, max);
-        let h = threshold(&p, Integrator::Harmonic, false, max);
-        let hx = threshold(&p, Integrator::Harmonic, true, max);
-        let ee = threshold(&p, Integrator::ExplicitEuler, false, 2.0);
-        let _ = writeln!(
-            out,
-            "| {name} | {} | {} | {} | {} | {} | {} |",
-            fmt_threshold(se, max),
-            fmt_paper(np_se),
-            fmt_threshold(h, max),
-            fmt_paper(np_h),
-            fmt_threshold(hx, max),
-            fmt_threshold(ee, 2.0)
-        );
+    let _ = writeln!(out, "Each cell: ours (numpy study's figure from MATH.md).\n");
+    let columns: [(&str, Integrator, bool); 7] = [
+        ("symplectic Euler", Integrator::SymplecticEuler, false),
+        ("harmonic (Jacobi)", Integrator::Harmonic, false),
+        ("harmonic-forced", Integrator::HarmonicForced, false),
+        ("harmonic-gs", Integrator::HarmonicGs, false),
+        ("harmonic-forced-gs", Integrator::HarmonicForcedGs, false),
+        ("harmonic, exact displacement", Integrator::Harmonic, true),
+        ("explicit Euler", Integrator::ExplicitEuler, false),
+    ];
+    let names: Vec<&str> = columns.iter().map(|c| c.0).collect();
+    let _ = writeln!(out, "| system | {} |", names.join(" | "));
+    let _ = writeln!(out, "|---|{}", "---|".repeat(columns.len()));
+    for study in threshold_systems() {
+        let p = pack(&study.scene);
+        let cells: Vec<String> = columns
+            .iter()
+            .map(|&(_, integrator, exact)| {
+                let ours = fmt_threshold(threshold(&p, integrator, exact, max), max);
+                let theirs = match (integrator, exact) {
+                    (Integrator::SymplecticEuler, _) => study.symplectic_euler,
+                    (Integrator::Harmonic, false) => study.harmonic,
+                    (Integrator::HarmonicForced, _) => study.forced,
+                    (Integrator::HarmonicGs, _) => study.gauss_seidel,
+                    _ => f64::NAN,
+                };
+                if theirs.is_nan() { ours } else { format!("{ours} ({})", fmt_paper(theirs)) }
+            })
+            .collect();
+        let _ = writeln!(out, "| {} | {} |", study.name, cells.join(" | "));
     }
     // Stable windows of the undamped single spring above the first threshold.
     let p = pack(&pair(1.0, 0.0, false, Start::Equilibrium).0);

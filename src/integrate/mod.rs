@@ -1,5 +1,6 @@
 #![doc = include_str!("MATH.md")]
 
+mod gauss_seidel;
 pub mod harmonic;
 pub mod paper;
 
@@ -28,11 +29,20 @@ pub enum Integrator {
     ExplicitEuler,
     /// Classical fourth-order Runge–Kutta: the fine-step reference.
     Rk4,
+    /// The closed form applied spring by spring in Gauss–Seidel order over a colouring.
+    HarmonicGs,
+    /// Each spring's oscillator forced by the other forces, frozen at the start of the step.
+    HarmonicForced,
+    /// Forced, in Gauss–Seidel order.
+    HarmonicForcedGs,
 }
 
 impl Integrator {
-    pub const ALL: [Integrator; 5] = [
+    pub const ALL: [Integrator; 8] = [
         Integrator::Harmonic,
+        Integrator::HarmonicGs,
+        Integrator::HarmonicForced,
+        Integrator::HarmonicForcedGs,
         Integrator::HarmonicPaper,
         Integrator::SymplecticEuler,
         Integrator::ExplicitEuler,
@@ -46,6 +56,9 @@ impl Integrator {
             Integrator::SymplecticEuler => "symplectic-euler",
             Integrator::ExplicitEuler => "explicit-euler",
             Integrator::Rk4 => "rk4",
+            Integrator::HarmonicGs => "harmonic-gs",
+            Integrator::HarmonicForced => "harmonic-forced",
+            Integrator::HarmonicForcedGs => "harmonic-forced-gs",
         }
     }
 }
@@ -67,8 +80,8 @@ impl FromStr for Integrator {
 }
 
 /// Below this many elements a pass runs on the calling thread: rayon's fork costs more.
-const PAR_MIN: usize = 4096;
-const PAR_CHUNK: usize = 1024;
+pub(crate) const PAR_MIN: usize = 4096;
+pub(crate) const PAR_CHUNK: usize = 1024;
 
 /// Whether any pass over this scene goes to rayon's pool.
 pub fn runs_parallel(packed: &Packed) -> bool {
@@ -79,6 +92,8 @@ pub fn runs_parallel(packed: &Packed) -> bool {
 #[derive(Clone, Copy)]
 enum Law<'a> {
     Linear(&'a [Linear]),
+    /// `φ = p δ + q δ̇ + s a` with `a` the frozen relative acceleration from everything else.
+    Forced(&'a [Linear], &'a [f64]),
     Paper(&'a [PaperSpring], f64),
 }
 
@@ -107,6 +122,11 @@ pub struct Solver {
     sdv: Vec<DVec3>,
     sdx: Vec<DVec3>,
     rk: Vec<Vec<DVec3>>,
+    /// Forced variants: per-spring relative accelerations at h = 1, per-particle
+    /// accelerations, and each spring's frozen relative acceleration from everything else.
+    acc: Vec<Linear>,
+    pacc: Vec<DVec3>,
+    force: Vec<f64>,
 }
 
 impl Solver {
@@ -121,6 +141,9 @@ impl Solver {
             sdv: Vec::new(),
             sdx: Vec::new(),
             rk: Vec::new(),
+            acc: Vec::new(),
+            pacc: Vec::new(),
+            force: Vec::new(),
         }
     }
 
@@ -143,8 +166,18 @@ impl Solver {
         self.lin.clear();
         self.paper.clear();
         self.rk.clear();
+        self.acc.clear();
+        let forced = matches!(self.integrator, Integrator::HarmonicForced | Integrator::HarmonicForcedGs);
+        if forced {
+            self.acc.extend(packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)));
+        }
+        self.pacc.resize(if forced { n } else { 0 }, DVec3::ZERO);
+        self.force.resize(if forced { m } else { 0 }, 0.0);
         match self.integrator {
-            Integrator::Harmonic => self.lin.extend(
+            Integrator::Harmonic
+            | Integrator::HarmonicGs
+            | Integrator::HarmonicForced
+            | Integrator::HarmonicForcedGs => self.lin.extend(
                 packed
                     .springs
                     .iter()
@@ -246,8 +279,49 @@ impl Solver {
                 particle_pass(packed, &self.sdv, &[], g, h, Update::PaperAlgorithm1);
             }
             Integrator::Rk4 => self.rk4(packed, h),
+            Integrator::HarmonicGs => {
+                gauss_seidel::add_gravity(packed, g, h);
+                gauss_seidel::sweep(packed, &self.lin, None);
+                gauss_seidel::drift(packed, h);
+            }
+            Integrator::HarmonicForced => {
+                self.freeze_forcing(packed);
+                let law = Law::Forced(&self.lin, &self.force);
+                spring_pass(&packed.springs, &packed.x, &packed.v, law, &mut self.sdv, None);
+                particle_pass(packed, &self.sdv, &[], g, h, Update::VelocityFirst);
+            }
+            Integrator::HarmonicForcedGs => {
+                self.freeze_forcing(packed);
+                // Gravity is in the forcing; it reaches the velocities after the sweep.
+                gauss_seidel::sweep(packed, &self.lin, Some(&self.force));
+                gauss_seidel::add_gravity(packed, g, h);
+                gauss_seidel::drift(packed, h);
+            }
         }
         Ok(())
+    }
+
+    /// For each spring, the relative acceleration along its axis from every force but its
+    /// own (other springs, gravity), at the start of the step.
+    fn freeze_forcing(&mut self, packed: &Packed) {
+        let g = self.gravity;
+        spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.acc), &mut self.sdv, None);
+        acceleration(packed, &self.sdv, g, &mut self.pacc);
+        let (springs, x, sacc, pacc) = (&packed.springs, &packed.x, &self.sdv, &self.pacc);
+        let body = |(k, out): (usize, &mut f64)| {
+            let s = &springs[k];
+            let (a, b) = (s.a as usize, s.b as usize);
+            let n = (x[b] - x[a]).normalize();
+            // Remove this spring's own share: +wb·sacc at b, −wa·sacc at a.
+            let other_b = pacc[b] - s.wb * sacc[k];
+            let other_a = pacc[a] + s.wa * sacc[k];
+            *out = n.dot(other_b - other_a);
+        };
+        if self.force.len() < PAR_MIN {
+            self.force.iter_mut().enumerate().for_each(body);
+        } else {
+            self.force.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+        }
     }
 
     fn rk4(&mut self, packed: &mut Packed, h: f64) {
@@ -326,6 +400,10 @@ fn spring_update(
                 l.p * delta + l.q * delta_dot,
                 l.r * delta + l.s * delta_dot,
             )
+        }
+        Law::Forced(lin, force) => {
+            let l = &lin[k];
+            (n, l.p * delta + l.q * delta_dot + l.s * force[k], 0.0)
         }
         Law::Paper(paper, h) => (n, paper[k].phi(delta, delta_dot, h), 0.0),
     }
