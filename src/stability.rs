@@ -15,13 +15,15 @@ use crate::statics;
 pub const RATIOS: [f64; 8] = [0.25, 0.5, 1.0, 2.0, 2.0625, 4.0, 6.0625, 8.0625];
 
 /// Integrators the suite compares (RK4 is the reference, not a contender).
-pub const CONTENDERS: [Integrator; 7] = [
+pub const CONTENDERS: [Integrator; 9] = [
     Integrator::SymplecticEuler,
     Integrator::ExplicitEuler,
     Integrator::Harmonic,
     Integrator::HarmonicGs,
     Integrator::HarmonicForced,
     Integrator::HarmonicForcedGs,
+    Integrator::ImplicitEuler,
+    Integrator::Xpbd,
     Integrator::HarmonicPaper,
 ];
 
@@ -453,7 +455,7 @@ pub fn report(opts: &Options) -> String {
         "h_c = π/ω0 of the stiffest single spring. Scanned in steps of 0.01 up to {max}, then bisected.\n"
     );
     let _ = writeln!(out, "Each cell: ours (numpy study's figure from MATH.md).\n");
-    let columns: [(&str, Integrator, bool); 7] = [
+    let columns: [(&str, Integrator, bool); 9] = [
         ("symplectic Euler", Integrator::SymplecticEuler, false),
         ("harmonic (Jacobi)", Integrator::Harmonic, false),
         ("harmonic-forced", Integrator::HarmonicForced, false),
@@ -461,6 +463,8 @@ pub fn report(opts: &Options) -> String {
         ("harmonic-forced-gs", Integrator::HarmonicForcedGs, false),
         ("harmonic, exact displacement", Integrator::Harmonic, true),
         ("explicit Euler", Integrator::ExplicitEuler, false),
+        ("implicit-euler", Integrator::ImplicitEuler, false),
+        ("xpbd", Integrator::Xpbd, false),
     ];
     let names: Vec<&str> = columns.iter().map(|c| c.0).collect();
     let _ = writeln!(out, "| system | {} |", names.join(" | "));

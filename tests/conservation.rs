@@ -1,5 +1,6 @@
 //! Conservation laws: momentum to round-off without gravity or pins, for every integrator,
-//! on random networks with springs in all three damping regimes.
+//! on random networks with springs in all three damping regimes (implicit Euler: to its
+//! conjugate-gradient tolerance, since an inexact solve moves momentum by its residual).
 
 mod common;
 use common::*;
@@ -62,6 +63,11 @@ fn momentum_is_conserved_to_round_off() {
         let (p1, _) = momentum(&sim);
         let drift = (p1 - p0).length() / scale;
         println!("{integrator}: momentum drift {drift:.2e} of Σ m|v|");
-        assert!(drift < 1e-12, "{integrator}: momentum drifted by {drift:e}");
+        let tol = if integrator == Integrator::ImplicitEuler {
+            10.0 * harmonic::integrate::implicit::CG_TOLERANCE
+        } else {
+            1e-12
+        };
+        assert!(drift < tol, "{integrator}: momentum drifted by {drift:e}");
     }
 }

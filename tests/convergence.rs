@@ -85,6 +85,11 @@ fn integrators_converge_at_their_order() {
         (Integrator::SymplecticEuler, false, n_small, 1.0),
         (Integrator::Harmonic, false, n_small, 1.0),
         (Integrator::Harmonic, true, n_small, 1.0),
+        (Integrator::HarmonicGs, false, n_small, 1.0),
+        (Integrator::HarmonicForced, false, n_small, 1.0),
+        (Integrator::HarmonicForcedGs, false, n_small, 1.0),
+        (Integrator::ImplicitEuler, false, n_small, 1.0),
+        (Integrator::Xpbd, false, n_small, 1.0),
         (Integrator::Rk4, false, n_rk, 4.0),
     ];
     for (integrator, exact, n, expected) in cases {

@@ -107,3 +107,44 @@ fn relaxed_cloth_is_a_fixed_point() {
         other => panic!("{other:?}"),
     }
 }
+
+#[test]
+fn forced_harmonic_keeps_statics_exact() {
+    // Started at the exact equilibrium, the forced oscillator step does not move the chain at
+    // a large stable step; the unforced step sags (a loaded spring's impulse is κδ·sin(ωh)/ω).
+    let (scene, strain) = stability::chain(20, 0.2, Start::Equilibrium);
+    let p = pack(&scene);
+    let g = DVec3::from(scene.gravity);
+    let h = 0.3 * stability::h_crit(&p);
+    let ratio = |integrator| match stability::run(&p, integrator, g, h, 2.0, 1.0) {
+        stability::Outcome::Bounded { max_strain, .. } => max_strain / strain,
+        other => panic!("{integrator}: {other:?}"),
+    };
+    let (forced, plain) = (ratio(Integrator::HarmonicForced), ratio(Integrator::Harmonic));
+    println!("max strain / static strain at 0.3 h_c: forced {forced:.12}, harmonic {plain:.6}");
+    assert!((forced - 1.0).abs() < 1e-9, "forced step moved the static chain: {forced}");
+    assert!(plain - 1.0 > 1e-3, "unforced step should overshoot statics: {plain}");
+}
+
+#[test]
+fn implicit_euler_stays_bounded_at_large_steps() {
+    // Unconditionally stable: the hanging chain and cloth at h/h_c = 8.0625 stay bounded, and
+    // from rest the chain settles near its static strain.
+    let (scene, strain) = stability::chain(20, 0.0, Start::Rest);
+    let p = pack(&scene);
+    let h = 8.0625 * stability::h_crit(&p);
+    match stability::run(&p, Integrator::ImplicitEuler, DVec3::from(scene.gravity), h, 10.0, 1.0) {
+        stability::Outcome::Bounded { max_strain, .. } => {
+            println!("chain: max strain {max_strain:.4} vs static {strain:.4}");
+            assert!(max_strain < 2.5 * strain, "{max_strain}");
+        }
+        other => panic!("chain: {other:?}"),
+    }
+    let (cloth, _) = stability::cloth_case(16, 0.2, Start::Rest);
+    let p = pack(&cloth);
+    let h = 8.0625 * stability::h_crit(&p);
+    assert!(matches!(
+        stability::run(&p, Integrator::ImplicitEuler, DVec3::from(cloth.gravity), h, 2.0, 1.0),
+        stability::Outcome::Bounded { .. }
+    ));
+}

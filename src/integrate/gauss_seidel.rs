@@ -11,7 +11,7 @@ use super::{PAR_CHUNK, PAR_MIN};
 use crate::buffers::Packed;
 
 /// A slice written from parallel tasks at indices that never collide.
-struct Disjoint<'a, T> {
+pub(super) struct Disjoint<'a, T> {
     ptr: *mut T,
     len: usize,
     _life: PhantomData<&'a mut [T]>,
@@ -23,7 +23,7 @@ unsafe impl<T: Send> Send for Disjoint<'_, T> {}
 unsafe impl<T: Send> Sync for Disjoint<'_, T> {}
 
 impl<'a, T> Disjoint<'a, T> {
-    fn new(slice: &'a mut [T]) -> Self {
+    pub(super) fn new(slice: &'a mut [T]) -> Self {
         Self {
             ptr: slice.as_mut_ptr(),
             len: slice.len(),
@@ -33,7 +33,7 @@ impl<'a, T> Disjoint<'a, T> {
     /// # Safety
     /// No two live references may point at the same index.
     #[allow(clippy::mut_from_ref)]
-    unsafe fn get(&self, i: usize) -> &mut T {
+    pub(super) unsafe fn get(&self, i: usize) -> &mut T {
         assert!(i < self.len);
         // SAFETY: in bounds (checked above); exclusivity is the caller's contract.
         unsafe { &mut *self.ptr.add(i) }

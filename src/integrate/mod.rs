@@ -2,7 +2,9 @@
 
 mod gauss_seidel;
 pub mod harmonic;
+pub mod implicit;
 pub mod paper;
+pub mod xpbd;
 
 use std::fmt;
 use std::str::FromStr;
@@ -35,10 +37,14 @@ pub enum Integrator {
     HarmonicForced,
     /// Forced, in Gauss–Seidel order.
     HarmonicForcedGs,
+    /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
+    ImplicitEuler,
+    /// Small-step XPBD, one iteration per substep.
+    Xpbd,
 }
 
 impl Integrator {
-    pub const ALL: [Integrator; 8] = [
+    pub const ALL: [Integrator; 10] = [
         Integrator::Harmonic,
         Integrator::HarmonicGs,
         Integrator::HarmonicForced,
@@ -46,6 +52,8 @@ impl Integrator {
         Integrator::HarmonicPaper,
         Integrator::SymplecticEuler,
         Integrator::ExplicitEuler,
+        Integrator::ImplicitEuler,
+        Integrator::Xpbd,
         Integrator::Rk4,
     ];
 
@@ -59,6 +67,8 @@ impl Integrator {
             Integrator::HarmonicGs => "harmonic-gs",
             Integrator::HarmonicForced => "harmonic-forced",
             Integrator::HarmonicForcedGs => "harmonic-forced-gs",
+            Integrator::ImplicitEuler => "implicit-euler",
+            Integrator::Xpbd => "xpbd",
         }
     }
 }
@@ -117,6 +127,8 @@ pub struct Solver {
     pub exact_displacement: bool,
     pub gravity: DVec3,
     h: f64,
+    /// (particles, springs) the scratch was sized for.
+    sized_for: (usize, usize),
     lin: Vec<Linear>,
     paper: Vec<PaperSpring>,
     sdv: Vec<DVec3>,
@@ -127,6 +139,8 @@ pub struct Solver {
     acc: Vec<Linear>,
     pacc: Vec<DVec3>,
     force: Vec<f64>,
+    implicit: implicit::Implicit,
+    xpbd: xpbd::Xpbd,
 }
 
 impl Solver {
@@ -136,6 +150,7 @@ impl Solver {
             exact_displacement,
             gravity,
             h: f64::NAN,
+            sized_for: (0, 0),
             lin: Vec::new(),
             paper: Vec::new(),
             sdv: Vec::new(),
@@ -144,6 +159,8 @@ impl Solver {
             acc: Vec::new(),
             pacc: Vec::new(),
             force: Vec::new(),
+            implicit: implicit::Implicit::default(),
+            xpbd: xpbd::Xpbd::default(),
         }
     }
 
@@ -157,7 +174,7 @@ impl Solver {
     pub fn prepare(&mut self, packed: &Packed, h: f64) -> Result<(), SimError> {
         let m = packed.springs.len();
         let n = packed.particle_count();
-        if self.h == h && self.sdv.len() == m && self.lin.len() == m {
+        if self.h == h && self.sized_for == (n, m) {
             return Ok(());
         }
         self.sdv.resize(m, DVec3::ZERO);
@@ -199,6 +216,8 @@ impl Solver {
                 );
                 self.rk = vec![vec![DVec3::ZERO; n]; 10];
             }
+            Integrator::ImplicitEuler => self.implicit.resize(n, m),
+            Integrator::Xpbd => self.xpbd.resize(n),
             Integrator::HarmonicPaper => {
                 for (k, s) in packed.springs.iter().enumerate() {
                     if !s.mu.is_finite() {
@@ -225,6 +244,7 @@ impl Solver {
             }
         }
         self.h = h;
+        self.sized_for = (n, m);
         Ok(())
     }
 
@@ -297,6 +317,8 @@ impl Solver {
                 gauss_seidel::add_gravity(packed, g, h);
                 gauss_seidel::drift(packed, h);
             }
+            Integrator::ImplicitEuler => self.implicit.step(packed, g, h),
+            Integrator::Xpbd => self.xpbd.step(packed, g, h),
         }
         Ok(())
     }

@@ -1,0 +1,232 @@
+//! Implicit Euler (Baraff–Witkin): one Newton step, solved matrix-free by conjugate gradients.
+//!
+//! `(M − h D − h² K) Δv = h (f + h K v)`, then `v += Δv`, `x += h v`. Per spring, with unit
+//! axis `n`, length `l` and `t = max(0, 1 − l0/l)` (compressed springs get no transverse
+//! stiffness, which keeps the matrix positive definite):
+//! `−K_s = κ [n nᵀ + t (I − n nᵀ)]`, `−D_s = c n nᵀ`, so the spring's block of the system is
+//! `B_s = h c n nᵀ + h² κ [n nᵀ + t (I − n nᵀ)]`, added at `(a,a)` and `(b,b)` and subtracted at
+//! `(a,b)` and `(b,a)`. Pinned particles are held (`Δv = 0`).
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::{PAR_CHUNK, PAR_MIN};
+use crate::buffers::Packed;
+
+/// Relative residual at which CG stops.
+pub const CG_TOLERANCE: f64 = 1e-8;
+/// CG iteration cap per step.
+pub const CG_MAX_ITERATIONS: usize = 200;
+
+/// Scratch for one implicit step, sized at prepare.
+#[derive(Clone, Debug, Default)]
+pub struct Implicit {
+    /// Per spring: axis and transverse factor `t`.
+    axis: Vec<(DVec3, f64)>,
+    /// Per spring: a product's per-spring term.
+    term: Vec<DVec3>,
+    rhs: Vec<DVec3>,
+    dv: Vec<DVec3>,
+    r: Vec<DVec3>,
+    z: Vec<DVec3>,
+    p: Vec<DVec3>,
+    ap: Vec<DVec3>,
+    /// Jacobi preconditioner: inverse of the block diagonal's diagonal.
+    precond: Vec<DVec3>,
+    partial: Vec<f64>,
+    /// CG iterations of the last step.
+    pub last_iterations: usize,
+}
+
+/// Chunk size for deterministic dot products (same partial sums whatever the thread count).
+const DOT_CHUNK: usize = 2048;
+
+impl Implicit {
+    pub fn resize(&mut self, n: usize, m: usize) {
+        self.axis.resize(m, (DVec3::ZERO, 0.0));
+        self.term.resize(m, DVec3::ZERO);
+        for v in [&mut self.rhs, &mut self.dv, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.precond] {
+            v.resize(n, DVec3::ZERO);
+        }
+        self.partial.resize(n.div_ceil(DOT_CHUNK), 0.0);
+    }
+
+    pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
+        let n = packed.particle_count();
+        let springs = &packed.springs;
+        let (x, v) = (&packed.x, &packed.v);
+        // Geometry, and per spring the force term `f_s + h K_s (v_b − v_a)` acting on b.
+        let geom = |(k, (ax, term)): (usize, (&mut (DVec3, f64), &mut DVec3))| {
+            let s = &springs[k];
+            let (a, b) = (s.a as usize, s.b as usize);
+            let d = x[b] - x[a];
+            let len = d.length();
+            let nn = d / len;
+            let t = (1.0 - s.rest / len).max(0.0);
+            *ax = (nn, t);
+            let dv = v[b] - v[a];
+            let force = -(s.stiffness * (len - s.rest) + s.damping * nn.dot(dv)) * nn;
+            let k_dv = -s.stiffness * (nn * nn.dot(dv) + t * (dv - nn * nn.dot(dv)));
+            *term = force + h * k_dv;
+        };
+        if springs.len() < PAR_MIN {
+            self.axis.iter_mut().zip(self.term.iter_mut()).enumerate().for_each(geom);
+        } else {
+            self.axis.par_iter_mut().zip(self.term.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(geom);
+        }
+        // rhs = h (m g + Σ ±term); preconditioner = 1 / diag(M + Σ B_s).
+        {
+            let (axis, term) = (&self.axis, &self.term);
+            let body = |(i, (rhs, pre)): (usize, (&mut DVec3, &mut DVec3))| {
+                if packed.inv_mass[i] == 0.0 {
+                    *rhs = DVec3::ZERO;
+                    *pre = DVec3::ZERO;
+                    return;
+                }
+                let (lo, hi) = (packed.incidence.offsets[i] as usize, packed.incidence.offsets[i + 1] as usize);
+                let mut f = packed.mass[i] * g;
+                let mut diag = DVec3::splat(packed.mass[i]);
+                for e in lo..hi {
+                    let k = packed.incidence.spring[e] as usize;
+                    let sign = packed.incidence.coef[e].signum();
+                    f += sign * term[k];
+                    let s = &springs[k];
+                    let (nn, t) = axis[k];
+                    let nn2 = nn * nn;
+                    diag += h * s.damping * nn2 + h * h * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
+                }
+                *rhs = h * f;
+                *pre = diag.recip();
+            };
+            if n < PAR_MIN {
+                self.rhs.iter_mut().zip(self.precond.iter_mut()).enumerate().for_each(body);
+            } else {
+                self.rhs.par_iter_mut().zip(self.precond.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(body);
+            }
+        }
+        self.solve(packed, h);
+        // v += Δv; x += h v.
+        let dv = &self.dv;
+        let Packed { x, v, inv_mass, .. } = packed;
+        let body = |(i, (xi, vi)): (usize, (&mut DVec3, &mut DVec3))| {
+            if inv_mass[i] != 0.0 {
+                *vi += dv[i];
+                *xi += h * *vi;
+            }
+        };
+        if n < PAR_MIN {
+            x.iter_mut().zip(v.iter_mut()).enumerate().for_each(body);
+        } else {
+            x.par_iter_mut().zip(v.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(body);
+        }
+    }
+
+    /// Preconditioned CG on `A Δv = rhs`, starting from `Δv = 0`.
+    fn solve(&mut self, packed: &Packed, h: f64) {
+        self.dv.iter_mut().for_each(|d| *d = DVec3::ZERO);
+        self.r.copy_from_slice(&self.rhs);
+        apply_precond(&self.precond, &self.r, &mut self.z);
+        self.p.copy_from_slice(&self.z);
+        let mut rz = dot(&self.r, &self.z, &mut self.partial);
+        let r0 = dot(&self.rhs, &self.rhs, &mut self.partial).sqrt();
+        self.last_iterations = 0;
+        if r0 == 0.0 {
+            return;
+        }
+        for it in 1..=CG_MAX_ITERATIONS {
+            self.multiply(packed, h);
+            let pap = dot(&self.p, &self.ap, &mut self.partial);
+            if pap <= 0.0 || !pap.is_finite() {
+                break;
+            }
+            let alpha = rz / pap;
+            axpy(alpha, &self.p, &mut self.dv);
+            axpy(-alpha, &self.ap, &mut self.r);
+            self.last_iterations = it;
+            if dot(&self.r, &self.r, &mut self.partial).sqrt() <= CG_TOLERANCE * r0 {
+                break;
+            }
+            apply_precond(&self.precond, &self.r, &mut self.z);
+            let rz_new = dot(&self.r, &self.z, &mut self.partial);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            let z = &self.z;
+            let body = |(pi, zi): (&mut DVec3, &DVec3)| *pi = *zi + beta * *pi;
+            if z.len() < PAR_MIN {
+                self.p.iter_mut().zip(z.iter()).for_each(body);
+            } else {
+                self.p.par_iter_mut().zip(z.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+            }
+        }
+    }
+
+    /// `ap = A p` without forming `A`.
+    fn multiply(&mut self, packed: &Packed, h: f64) {
+        let (springs, axis, p) = (&packed.springs, &self.axis, &self.p);
+        let per_spring = |(k, out): (usize, &mut DVec3)| {
+            let s = &springs[k];
+            let (nn, t) = axis[k];
+            let du = p[s.b as usize] - p[s.a as usize];
+            let along = nn * nn.dot(du);
+            *out = h * s.damping * along + h * h * s.stiffness * (along + t * (du - along));
+        };
+        if springs.len() < PAR_MIN {
+            self.term.iter_mut().enumerate().for_each(per_spring);
+        } else {
+            self.term.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(per_spring);
+        }
+        let term = &self.term;
+        let inc = &packed.incidence;
+        let per_particle = |(i, out): (usize, &mut DVec3)| {
+            if packed.inv_mass[i] == 0.0 {
+                *out = DVec3::ZERO;
+                return;
+            }
+            // (A p)_b gets +B(p_b − p_a), (A p)_a gets −B(p_b − p_a).
+            let (lo, hi) = (inc.offsets[i] as usize, inc.offsets[i + 1] as usize);
+            let mut sum = packed.mass[i] * p[i];
+            for e in lo..hi {
+                sum += inc.coef[e].signum() * term[inc.spring[e] as usize];
+            }
+            *out = sum;
+        };
+        if p.len() < PAR_MIN {
+            self.ap.iter_mut().enumerate().for_each(per_particle);
+        } else {
+            self.ap.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(per_particle);
+        }
+    }
+}
+
+fn apply_precond(pre: &[DVec3], r: &[DVec3], z: &mut [DVec3]) {
+    let body = |((zi, ri), pi): ((&mut DVec3, &DVec3), &DVec3)| *zi = *ri * *pi;
+    if z.len() < PAR_MIN {
+        z.iter_mut().zip(r).zip(pre).for_each(body);
+    } else {
+        z.par_iter_mut().zip(r.par_iter()).zip(pre.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+    }
+}
+
+fn axpy(alpha: f64, x: &[DVec3], y: &mut [DVec3]) {
+    let body = |(yi, xi): (&mut DVec3, &DVec3)| *yi += alpha * *xi;
+    if y.len() < PAR_MIN {
+        y.iter_mut().zip(x).for_each(body);
+    } else {
+        y.par_iter_mut().zip(x.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+    }
+}
+
+/// Dot product with fixed chunking, so the result is bit-identical for any thread count.
+fn dot(a: &[DVec3], b: &[DVec3], partial: &mut [f64]) -> f64 {
+    let body = |(c, out): (usize, &mut f64)| {
+        let lo = c * DOT_CHUNK;
+        let hi = (lo + DOT_CHUNK).min(a.len());
+        *out = (lo..hi).map(|i| a[i].dot(b[i])).sum();
+    };
+    if a.len() < PAR_MIN {
+        partial.iter_mut().enumerate().for_each(body);
+    } else {
+        partial.par_iter_mut().enumerate().for_each(body);
+    }
+    partial.iter().sum()
+}
