@@ -20,7 +20,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
     Scene {
         name: Some(format!("hanging cloth {n}×{n}")),
         dt: 1e-4,
-        substeps: 1,
+        substeps: Some(1),
         gravity: [0.0, -9.81, 0.0],
         integrator: None,
         exact_displacement: false,

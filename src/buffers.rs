@@ -133,7 +133,10 @@ impl Colouring {
                 fill[c as usize] += 1;
             }
         }
-        Colouring { offsets, springs: order }
+        Colouring {
+            offsets,
+            springs: order,
+        }
     }
 }
 

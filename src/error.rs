@@ -83,5 +83,9 @@ pub enum Error {
 }
 
 fn known_integrators() -> String {
-    crate::Integrator::ALL.iter().map(|i| i.name()).collect::<Vec<_>>().join(", ")
+    crate::Integrator::ALL
+        .iter()
+        .map(|i| i.name())
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -41,6 +41,7 @@ pub mod schedule;
 mod simulation;
 pub mod stability;
 pub mod statics;
+pub mod step_control;
 
 pub use components::{Particle, Pin, SceneIndex, Spring};
 pub use error::{Error, SceneError, SimError};

@@ -12,14 +12,19 @@ use crate::integrate::{Integrator, Solver};
 use crate::metrics;
 use crate::scene::Scene;
 use crate::schedule::StepStats;
+use crate::step_control::{self, StepChoice};
 
 /// How a simulation steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SimConfig {
     /// Frame step (s).
     pub dt: f64,
-    /// Substeps per frame; the integrator's step is `h = dt / substeps`.
+    /// Substeps per frame; the integrator's step is `h = dt / substeps`. With
+    /// `auto_substeps` this is chosen at every gather and on [`Simulation::set_config`].
     pub substeps: u32,
+    /// Choose `substeps` from the network's highest frequency and the integrator's measured
+    /// stability region ([`crate::step_control`]).
+    pub auto_substeps: bool,
     pub gravity: DVec3,
     pub integrator: Integrator,
     /// Harmonic only: move positions by each spring's closed-form displacement too.
@@ -31,6 +36,7 @@ impl Default for SimConfig {
         Self {
             dt: 1.0 / 60.0,
             substeps: 1,
+            auto_substeps: true,
             gravity: DVec3::new(0.0, -9.81, 0.0),
             integrator: Integrator::default(),
             exact_displacement: false,
@@ -71,6 +77,8 @@ pub struct Simulation {
     packed: Packed,
     solver: Solver,
     dirty: bool,
+    /// The automatic step choice, when `auto_substeps` is on.
+    choice: Option<StepChoice>,
     /// Whether the passes run on rayon's pool (large scenes only).
     parallel: bool,
     steps: u64,
@@ -88,6 +96,7 @@ impl Simulation {
             packed: Packed::default(),
             solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
             dirty: true,
+            choice: None,
             parallel: false,
             steps: 0,
             time: 0.0,
@@ -157,6 +166,7 @@ impl Simulation {
         self.packed = Packed::gather(&self.world)?;
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
+        self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
         self.dirty = false;
         Ok(())
@@ -186,7 +196,21 @@ impl Simulation {
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
         }
-        self.solver.prepare(&self.packed, config.h())
+        self.choose_substeps();
+        self.solver.prepare(&self.packed, self.config.h())
+    }
+
+    fn choose_substeps(&mut self) {
+        self.choice = self.config.auto_substeps.then(|| {
+            let choice = step_control::choose(&self.packed, self.config.integrator, self.config.dt);
+            self.config.substeps = choice.substeps;
+            choice
+        });
+    }
+
+    /// What automatic step control chose (None with fixed substeps).
+    pub fn step_choice(&self) -> Option<&StepChoice> {
+        self.choice.as_ref()
     }
 
     /// Positions in scene order (see [`crate::SceneIndex`]), as of the last step.

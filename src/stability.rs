@@ -56,7 +56,7 @@ fn base(dt: f64, gravity: [f64; 3]) -> Scene {
     Scene {
         name: None,
         dt,
-        substeps: 1,
+        substeps: Some(1),
         gravity,
         integrator: None,
         exact_displacement: false,
@@ -399,14 +399,63 @@ pub fn threshold_systems() -> Vec<Study> {
         s
     };
     let inf = f64::INFINITY;
-    let row = |name, scene, se, h, f, gs| Study { name, scene, symplectic_euler: se, harmonic: h, forced: f, gauss_seidel: gs };
+    let row = |name, scene, se, h, f, gs| Study {
+        name,
+        scene,
+        symplectic_euler: se,
+        harmonic: h,
+        forced: f,
+        gauss_seidel: gs,
+    };
     vec![
-        row("1 spring, ζ = 0", pair(1.0, 0.0, false, Start::Equilibrium).0, 0.64, 0.55, 0.55, 0.55),
-        row("1 spring, ζ = 2", pair(1.0, 2.0, false, Start::Equilibrium).0, 0.2, inf, inf, inf),
-        row("chain of 20, ζ = 0", zero_g(chain(20, 0.0, Start::Rest).0), 0.45, 0.34, 0.37, 0.56),
-        row("chain of 20, ζ = 0.2", zero_g(chain(20, 0.2, Start::Rest).0), 0.34, 0.31, 0.48, 0.65),
-        row("cloth 8×8, ζ = 0", zero_g(cloth(8, 0.0)), 0.30, 0.22, 0.24, 0.46),
-        row("cloth 8×8, ζ = 0.2", zero_g(cloth(8, 0.2)), 0.19, 0.17, 0.24, 0.97),
+        row(
+            "1 spring, ζ = 0",
+            pair(1.0, 0.0, false, Start::Equilibrium).0,
+            0.64,
+            0.55,
+            0.55,
+            0.55,
+        ),
+        row(
+            "1 spring, ζ = 2",
+            pair(1.0, 2.0, false, Start::Equilibrium).0,
+            0.2,
+            inf,
+            inf,
+            inf,
+        ),
+        row(
+            "chain of 20, ζ = 0",
+            zero_g(chain(20, 0.0, Start::Rest).0),
+            0.45,
+            0.34,
+            0.37,
+            0.56,
+        ),
+        row(
+            "chain of 20, ζ = 0.2",
+            zero_g(chain(20, 0.2, Start::Rest).0),
+            0.34,
+            0.31,
+            0.48,
+            0.65,
+        ),
+        row(
+            "cloth 8×8, ζ = 0",
+            zero_g(cloth(8, 0.0)),
+            0.30,
+            0.22,
+            0.24,
+            0.46,
+        ),
+        row(
+            "cloth 8×8, ζ = 0.2",
+            zero_g(cloth(8, 0.2)),
+            0.19,
+            0.17,
+            0.24,
+            0.97,
+        ),
     ]
 }
 
@@ -454,7 +503,10 @@ pub fn report(opts: &Options) -> String {
         out,
         "h_c = π/ω0 of the stiffest single spring. Scanned in steps of 0.01 up to {max}, then bisected.\n"
     );
-    let _ = writeln!(out, "Each cell: ours (numpy study's figure from MATH.md).\n");
+    let _ = writeln!(
+        out,
+        "Each cell: ours (numpy study's figure from MATH.md).\n"
+    );
     let columns: [(&str, Integrator, bool); 9] = [
         ("symplectic Euler", Integrator::SymplecticEuler, false),
         ("harmonic (Jacobi)", Integrator::Harmonic, false),
@@ -482,7 +534,11 @@ pub fn report(opts: &Options) -> String {
                     (Integrator::HarmonicGs, _) => study.gauss_seidel,
                     _ => f64::NAN,
                 };
-                if theirs.is_nan() { ours } else { format!("{ours} ({})", fmt_paper(theirs)) }
+                if theirs.is_nan() {
+                    ours
+                } else {
+                    format!("{ours} ({})", fmt_paper(theirs))
+                }
             })
             .collect();
         let _ = writeln!(out, "| {} | {} |", study.name, cells.join(" | "));
@@ -646,4 +702,66 @@ pub fn cloth_case(n: u32, zeta: f64, start: Start) -> (Scene, f64) {
 
 fn static_strain_of(p: &Packed, g: DVec3) -> f64 {
     statics::static_strain(p, &statics::relax(p, g, 1e-9, 2_000_000))
+}
+
+/// The hard-case suite as scene files: every case × ζ ∈ {0, 0.2, 1, 2} × start, with
+/// `dt = 8.0625 h_c` and no fixed substeps (so step control decides), plus the near-rigid
+/// chains at 60 Hz. Names are `<case>_z<ζ>_<start>.ron`.
+pub fn hard_scenes() -> Vec<(String, Scene)> {
+    type Make = fn(f64, Start) -> (Scene, f64);
+    let cases: [(&str, Make); 6] = [
+        ("pair_1to1", |z, s| pair(1.0, z, false, s)),
+        ("pair_1to1000", |z, s| pair(1000.0, z, false, s)),
+        ("pair_1to1_spinning", |z, s| pair(1.0, z, true, s)),
+        ("pair_1to1000_spinning", |z, s| pair(1000.0, z, true, s)),
+        ("chain20", |z, s| chain(20, z, s)),
+        ("cloth16", |z, s| cloth_case(16, z, s)),
+    ];
+    let mut out = Vec::new();
+    for (name, make) in cases {
+        for zeta in [0.0, 0.2, 1.0, 2.0] {
+            for start in [Start::Rest, Start::Equilibrium] {
+                let (mut scene, _) = make(zeta, start);
+                let hc = h_crit(&pack(&scene));
+                scene.dt = 8.0625 * hc;
+                scene.substeps = None;
+                scene.seconds = Some(10.0);
+                let tag = if start == Start::Rest {
+                    "rest"
+                } else {
+                    "equilibrium"
+                };
+                scene.name = Some(format!("{name}, ζ = {zeta}, from {tag}, dt = 8.0625 h_c"));
+                out.push((format!("{name}_z{zeta}_{tag}.ron"), scene));
+            }
+        }
+    }
+    for k in [1e4, 1e5, 1e6, 1e7] {
+        for zeta in [0.0, 0.2, 1.0, 2.0] {
+            let mut scene = near_rigid(k, zeta);
+            scene.substeps = None;
+            scene.seconds = Some(10.0);
+            scene.name = Some(format!(
+                "near-rigid chain, κ = {k:e} N/m, ζ = {zeta}, dt = 1/60 s"
+            ));
+            out.push((format!("near_rigid_k{k:e}_z{zeta}.ron"), scene));
+        }
+    }
+    out
+}
+
+/// Writes [`hard_scenes`] into `dir`.
+pub fn write_hard_scenes(dir: &std::path::Path) -> std::io::Result<usize> {
+    std::fs::create_dir_all(dir)?;
+    let config = ron::ser::PrettyConfig::new()
+        .struct_names(true)
+        .depth_limit(2);
+    let scenes = hard_scenes();
+    for (file, scene) in &scenes {
+        let text =
+            ron::ser::to_string_pretty(scene, config.clone()).map_err(std::io::Error::other)?;
+        let header = "// Generated by `harmonic stability --write-scenes scenes/hard`: one case of the hard-case suite.\n";
+        std::fs::write(dir.join(file), format!("{header}{text}\n"))?;
+    }
+    Ok(scenes.len())
 }

@@ -5,6 +5,7 @@ use glam::DVec3;
 use crate::buffers::Packed;
 use crate::integrate::{Integrator, Solver};
 use crate::metrics;
+use crate::step_control;
 
 /// Result of a relaxation.
 #[derive(Clone, Debug)]
@@ -15,26 +16,25 @@ pub struct Relaxed {
     pub iterations: usize,
 }
 
-/// Relaxes the packed state to rest under `gravity`: symplectic Euler at `0.3 h_c` of the
-/// stiffest spring, all velocities zeroed whenever the kinetic energy passes a peak
+/// Relaxes the packed state to rest under `gravity`: symplectic Euler at half its measured
+/// stable step, all velocities zeroed whenever the kinetic energy passes a peak
 /// (kinetic damping). Stops when every particle's net acceleration is below `tol` (m/s²) or after `max_iter` steps.
 pub fn relax(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize) -> Relaxed {
-    let w_max = packed
-        .springs
-        .iter()
-        .map(|s| s.omega0_sq())
-        .fold(0.0, f64::max)
-        .sqrt();
-    // 0.1 h_c is inside symplectic Euler's stable range on chains and cloth (about 0.3);
-    // should the network still diverge, halve the step and start again.
-    let mut h = if w_max > 0.0 {
-        0.1 * std::f64::consts::PI / w_max
-    } else {
-        1e-3
+    // Half the step symplectic Euler is measured to take on this network and damping; should
+    // it still diverge, halve the step and start again.
+    let choice = step_control::choose(packed, Integrator::SymplecticEuler, 1.0);
+    let mut h = match (choice.limit, choice.omega_max > 0.0) {
+        (Some(limit), true) => 0.5 * limit / choice.omega_max,
+        _ => 1e-3,
     };
     let mut out = relax_at(packed, gravity, tol, max_iter, h);
     for _ in 0..6 {
-        if out.positions.iter().all(|x| x.is_finite()) {
+        let sane = out.positions.iter().all(|x| x.is_finite()) && {
+            let mut p = packed.clone();
+            p.x.clone_from(&out.positions);
+            metrics::max_strain(&p) < 10.0
+        };
+        if sane {
             break;
         }
         h *= 0.5;

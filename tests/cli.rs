@@ -64,11 +64,23 @@ fn run_prints_a_summary_and_writes_the_trajectory() {
 
 #[test]
 fn run_reports_a_blow_up_with_a_non_zero_exit() {
-    let out = harmonic(&["run", "scenes/paper_fig1_near_rigid.ron", "--steps", "600"]);
+    // At the paper's one step per frame; by default step control subdivides and it stays bounded.
+    let out = harmonic(&[
+        "run",
+        "scenes/paper_fig1_near_rigid.ron",
+        "--steps",
+        "600",
+        "--substeps",
+        "1",
+    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("state went non-finite at step"), "{stderr}");
     assert!(String::from_utf8_lossy(&out.stdout).contains("non-finite: yes"));
+    let auto = harmonic(&["run", "scenes/paper_fig1_near_rigid.ron", "--steps", "60"]);
+    let stdout = String::from_utf8_lossy(&auto.stdout);
+    assert!(auto.status.success(), "{stdout}");
+    assert!(stdout.contains("substeps: automatic,"), "{stdout}");
 }
 
 #[test]

@@ -37,7 +37,7 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
         );
     }
     let text = format!(
-        "Scene(dt: 0.002, gravity: (0.0, 0.0, 0.0), integrator: \"{integrator}\", particles: [{particles}], springs: [{springs}])"
+        "Scene(dt: 0.002, substeps: 1, gravity: (0.0, 0.0, 0.0), integrator: \"{integrator}\", particles: [{particles}], springs: [{springs}])"
     );
     Simulation::from_scene(&Scene::parse(&text, "random").unwrap()).unwrap()
 }

@@ -21,6 +21,7 @@ fn positions_at_t(integrator: Integrator, exact: bool, steps: u32) -> Vec<DVec3>
     let config = SimConfig {
         dt: T / steps as f64,
         substeps: 1,
+        auto_substeps: false,
         integrator,
         exact_displacement: exact,
         ..*sim.config()

@@ -12,7 +12,10 @@ fn stable(p: &Packed, integrator: Integrator, ratio: f64) -> bool {
 
 #[test]
 fn thresholds_match_the_numpy_study_within_ten_percent() {
-    for study in stability::threshold_systems().into_iter().filter(|s| !s.name.starts_with("1 spring")) {
+    for study in stability::threshold_systems()
+        .into_iter()
+        .filter(|s| !s.name.starts_with("1 spring"))
+    {
         let p = Packed::gather(&study.scene.build().world).unwrap();
         for (integrator, figure) in [
             (Integrator::SymplecticEuler, study.symplectic_euler),

@@ -120,10 +120,19 @@ fn forced_harmonic_keeps_statics_exact() {
         stability::Outcome::Bounded { max_strain, .. } => max_strain / strain,
         other => panic!("{integrator}: {other:?}"),
     };
-    let (forced, plain) = (ratio(Integrator::HarmonicForced), ratio(Integrator::Harmonic));
+    let (forced, plain) = (
+        ratio(Integrator::HarmonicForced),
+        ratio(Integrator::Harmonic),
+    );
     println!("max strain / static strain at 0.3 h_c: forced {forced:.12}, harmonic {plain:.6}");
-    assert!((forced - 1.0).abs() < 1e-9, "forced step moved the static chain: {forced}");
-    assert!(plain - 1.0 > 1e-3, "unforced step should overshoot statics: {plain}");
+    assert!(
+        (forced - 1.0).abs() < 1e-9,
+        "forced step moved the static chain: {forced}"
+    );
+    assert!(
+        plain - 1.0 > 1e-3,
+        "unforced step should overshoot statics: {plain}"
+    );
 }
 
 #[test]
@@ -133,7 +142,14 @@ fn implicit_euler_stays_bounded_at_large_steps() {
     let (scene, strain) = stability::chain(20, 0.0, Start::Rest);
     let p = pack(&scene);
     let h = 8.0625 * stability::h_crit(&p);
-    match stability::run(&p, Integrator::ImplicitEuler, DVec3::from(scene.gravity), h, 10.0, 1.0) {
+    match stability::run(
+        &p,
+        Integrator::ImplicitEuler,
+        DVec3::from(scene.gravity),
+        h,
+        10.0,
+        1.0,
+    ) {
         stability::Outcome::Bounded { max_strain, .. } => {
             println!("chain: max strain {max_strain:.4} vs static {strain:.4}");
             assert!(max_strain < 2.5 * strain, "{max_strain}");
@@ -144,7 +160,14 @@ fn implicit_euler_stays_bounded_at_large_steps() {
     let p = pack(&cloth);
     let h = 8.0625 * stability::h_crit(&p);
     assert!(matches!(
-        stability::run(&p, Integrator::ImplicitEuler, DVec3::from(cloth.gravity), h, 2.0, 1.0),
+        stability::run(
+            &p,
+            Integrator::ImplicitEuler,
+            DVec3::from(cloth.gravity),
+            h,
+            2.0,
+            1.0
+        ),
         stability::Outcome::Bounded { .. }
     ));
 }

@@ -30,7 +30,7 @@ fn allocations_per_frame(n: u32, integrator: Integrator, exact: bool) -> f64 {
     let mut scene = harmonic::bench::hanging_cloth(n);
     scene.integrator = Some(integrator.name().to_string());
     scene.exact_displacement = exact;
-    scene.substeps = 4;
+    scene.substeps = Some(4);
     let mut sim = Simulation::from_scene(&scene).unwrap();
     for _ in 0..5 {
         sim.step().unwrap();

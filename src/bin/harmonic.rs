@@ -40,6 +40,9 @@ enum Command {
         /// Write the report here as well as to stdout.
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Instead of running the suite, write its cases as scene files into this folder.
+        #[arg(long)]
+        write_scenes: Option<PathBuf>,
     },
     /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
     Bench {
@@ -70,7 +73,7 @@ struct RunArgs {
     /// Override the scene's frame step (s).
     #[arg(long)]
     dt: Option<f64>,
-    /// Override the scene's substeps per frame.
+    /// Fix the substeps per frame (default: the scene's, else automatic).
     #[arg(long)]
     substeps: Option<u32>,
     /// Override the scene's integrator.
@@ -92,7 +95,15 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run(args),
         Command::Check { scenes } => check(&scenes),
-        Command::Stability { seconds, full, out } => {
+        Command::Stability {
+            write_scenes: Some(dir),
+            ..
+        } => stability::write_hard_scenes(&dir)
+            .map(|n| println!("wrote {n} scenes to {}", dir.display()))
+            .map_err(|e| format!("{}: {e}", dir.display())),
+        Command::Stability {
+            seconds, full, out, ..
+        } => {
             let report = stability::report(&stability::Options { seconds, full });
             print!("{report}");
             match out {
@@ -164,12 +175,14 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     if let Some(k) = args.substeps {
         config.substeps = k;
+        config.auto_substeps = false;
     }
     if let Some(name) = &args.integrator {
         config.integrator = name.parse().map_err(|e: SimError| e.to_string())?;
     }
     config.exact_displacement |= args.exact_displacement;
     sim.set_config(config).map_err(|e| e.to_string())?;
+    let config = *sim.config();
     if args.every == 0 {
         return Err("--every must be ≥ 1".into());
     }
@@ -210,9 +223,32 @@ fn run(args: RunArgs) -> Result<(), String> {
         config.substeps,
         config.h()
     );
+    if let Some(c) = sim.step_choice() {
+        let limit = c.limit.map_or("no stability limit".to_string(), |l| {
+            format!("ω_max h ≤ {l:.3}")
+        });
+        println!(
+            "substeps: automatic, {} ({limit} for ζ in [{:.3}, {:.3}], ω_max = {:.4e} rad/s){}",
+            c.substeps,
+            c.zeta_range.0,
+            c.zeta_range.1,
+            c.omega_max,
+            if c.capped {
+                " — capped: the scene needs more, expect instability"
+            } else {
+                ""
+            }
+        );
+    }
     match ratio {
         Some((r, k)) => println!("h/h_c of the stiffest spring: {r:.4} (spring {k}, h_c = π/ω0)"),
         None => println!("h/h_c of the stiffest spring: no springs"),
+    }
+    if let Some((k, r)) = harmonic::step_control::aliasing(packed, config.h(), 0.02) {
+        println!(
+            "warning: spring {k} is stepped at h/h_c = {r:.4}, within 2 % of a whole multiple of h_c: \
+             its closed-form impulse vanishes (even) or reverses its stretch rate (odd) there"
+        );
     }
 
     let mut max_strain = start.max_strain;

@@ -93,7 +93,10 @@ pub(super) fn add_gravity(packed: &mut Packed, g: DVec3, h: f64) {
     if v.len() < PAR_MIN {
         v.iter_mut().zip(inv_mass.iter()).for_each(body);
     } else {
-        v.par_iter_mut().zip(inv_mass.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+        v.par_iter_mut()
+            .zip(inv_mass.par_iter())
+            .with_min_len(PAR_CHUNK)
+            .for_each(body);
     }
 }
 
@@ -106,7 +109,10 @@ pub(super) fn drift(packed: &mut Packed, h: f64) {
         }
     };
     if x.len() < PAR_MIN {
-        x.iter_mut().zip(v.iter()).zip(inv_mass.iter()).for_each(body);
+        x.iter_mut()
+            .zip(v.iter())
+            .zip(inv_mass.iter())
+            .for_each(body);
     } else {
         x.par_iter_mut()
             .zip(v.par_iter())

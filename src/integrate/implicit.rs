@@ -45,7 +45,15 @@ impl Implicit {
     pub fn resize(&mut self, n: usize, m: usize) {
         self.axis.resize(m, (DVec3::ZERO, 0.0));
         self.term.resize(m, DVec3::ZERO);
-        for v in [&mut self.rhs, &mut self.dv, &mut self.r, &mut self.z, &mut self.p, &mut self.ap, &mut self.precond] {
+        for v in [
+            &mut self.rhs,
+            &mut self.dv,
+            &mut self.r,
+            &mut self.z,
+            &mut self.p,
+            &mut self.ap,
+            &mut self.precond,
+        ] {
             v.resize(n, DVec3::ZERO);
         }
         self.partial.resize(n.div_ceil(DOT_CHUNK), 0.0);
@@ -70,9 +78,18 @@ impl Implicit {
             *term = force + h * k_dv;
         };
         if springs.len() < PAR_MIN {
-            self.axis.iter_mut().zip(self.term.iter_mut()).enumerate().for_each(geom);
+            self.axis
+                .iter_mut()
+                .zip(self.term.iter_mut())
+                .enumerate()
+                .for_each(geom);
         } else {
-            self.axis.par_iter_mut().zip(self.term.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(geom);
+            self.axis
+                .par_iter_mut()
+                .zip(self.term.par_iter_mut())
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(geom);
         }
         // rhs = h (m g + Σ ±term); preconditioner = 1 / diag(M + Σ B_s).
         {
@@ -83,7 +100,10 @@ impl Implicit {
                     *pre = DVec3::ZERO;
                     return;
                 }
-                let (lo, hi) = (packed.incidence.offsets[i] as usize, packed.incidence.offsets[i + 1] as usize);
+                let (lo, hi) = (
+                    packed.incidence.offsets[i] as usize,
+                    packed.incidence.offsets[i + 1] as usize,
+                );
                 let mut f = packed.mass[i] * g;
                 let mut diag = DVec3::splat(packed.mass[i]);
                 for e in lo..hi {
@@ -93,15 +113,25 @@ impl Implicit {
                     let s = &springs[k];
                     let (nn, t) = axis[k];
                     let nn2 = nn * nn;
-                    diag += h * s.damping * nn2 + h * h * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
+                    diag +=
+                        h * s.damping * nn2 + h * h * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
                 }
                 *rhs = h * f;
                 *pre = diag.recip();
             };
             if n < PAR_MIN {
-                self.rhs.iter_mut().zip(self.precond.iter_mut()).enumerate().for_each(body);
+                self.rhs
+                    .iter_mut()
+                    .zip(self.precond.iter_mut())
+                    .enumerate()
+                    .for_each(body);
             } else {
-                self.rhs.par_iter_mut().zip(self.precond.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(body);
+                self.rhs
+                    .par_iter_mut()
+                    .zip(self.precond.par_iter_mut())
+                    .enumerate()
+                    .with_min_len(PAR_CHUNK)
+                    .for_each(body);
             }
         }
         self.solve(packed, h);
@@ -117,7 +147,11 @@ impl Implicit {
         if n < PAR_MIN {
             x.iter_mut().zip(v.iter_mut()).enumerate().for_each(body);
         } else {
-            x.par_iter_mut().zip(v.par_iter_mut()).enumerate().with_min_len(PAR_CHUNK).for_each(body);
+            x.par_iter_mut()
+                .zip(v.par_iter_mut())
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(body);
         }
     }
 
@@ -155,7 +189,11 @@ impl Implicit {
             if z.len() < PAR_MIN {
                 self.p.iter_mut().zip(z.iter()).for_each(body);
             } else {
-                self.p.par_iter_mut().zip(z.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+                self.p
+                    .par_iter_mut()
+                    .zip(z.par_iter())
+                    .with_min_len(PAR_CHUNK)
+                    .for_each(body);
             }
         }
     }
@@ -173,7 +211,11 @@ impl Implicit {
         if springs.len() < PAR_MIN {
             self.term.iter_mut().enumerate().for_each(per_spring);
         } else {
-            self.term.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(per_spring);
+            self.term
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(per_spring);
         }
         let term = &self.term;
         let inc = &packed.incidence;
@@ -193,7 +235,11 @@ impl Implicit {
         if p.len() < PAR_MIN {
             self.ap.iter_mut().enumerate().for_each(per_particle);
         } else {
-            self.ap.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(per_particle);
+            self.ap
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(per_particle);
         }
     }
 }
@@ -203,7 +249,11 @@ fn apply_precond(pre: &[DVec3], r: &[DVec3], z: &mut [DVec3]) {
     if z.len() < PAR_MIN {
         z.iter_mut().zip(r).zip(pre).for_each(body);
     } else {
-        z.par_iter_mut().zip(r.par_iter()).zip(pre.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+        z.par_iter_mut()
+            .zip(r.par_iter())
+            .zip(pre.par_iter())
+            .with_min_len(PAR_CHUNK)
+            .for_each(body);
     }
 }
 
@@ -212,7 +262,10 @@ fn axpy(alpha: f64, x: &[DVec3], y: &mut [DVec3]) {
     if y.len() < PAR_MIN {
         y.iter_mut().zip(x).for_each(body);
     } else {
-        y.par_iter_mut().zip(x.par_iter()).with_min_len(PAR_CHUNK).for_each(body);
+        y.par_iter_mut()
+            .zip(x.par_iter())
+            .with_min_len(PAR_CHUNK)
+            .for_each(body);
     }
 }
 

@@ -184,9 +184,17 @@ impl Solver {
         self.paper.clear();
         self.rk.clear();
         self.acc.clear();
-        let forced = matches!(self.integrator, Integrator::HarmonicForced | Integrator::HarmonicForcedGs);
+        let forced = matches!(
+            self.integrator,
+            Integrator::HarmonicForced | Integrator::HarmonicForcedGs
+        );
         if forced {
-            self.acc.extend(packed.springs.iter().map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)));
+            self.acc.extend(
+                packed
+                    .springs
+                    .iter()
+                    .map(|s| harmonic::euler(s.omega0_sq(), s.alpha(), 1.0)),
+            );
         }
         self.pacc.resize(if forced { n } else { 0 }, DVec3::ZERO);
         self.force.resize(if forced { m } else { 0 }, 0.0);
@@ -307,7 +315,14 @@ impl Solver {
             Integrator::HarmonicForced => {
                 self.freeze_forcing(packed);
                 let law = Law::Forced(&self.lin, &self.force);
-                spring_pass(&packed.springs, &packed.x, &packed.v, law, &mut self.sdv, None);
+                spring_pass(
+                    &packed.springs,
+                    &packed.x,
+                    &packed.v,
+                    law,
+                    &mut self.sdv,
+                    None,
+                );
                 particle_pass(packed, &self.sdv, &[], g, h, Update::VelocityFirst);
             }
             Integrator::HarmonicForcedGs => {
@@ -327,7 +342,14 @@ impl Solver {
     /// own (other springs, gravity), at the start of the step.
     fn freeze_forcing(&mut self, packed: &Packed) {
         let g = self.gravity;
-        spring_pass(&packed.springs, &packed.x, &packed.v, Law::Linear(&self.acc), &mut self.sdv, None);
+        spring_pass(
+            &packed.springs,
+            &packed.x,
+            &packed.v,
+            Law::Linear(&self.acc),
+            &mut self.sdv,
+            None,
+        );
         acceleration(packed, &self.sdv, g, &mut self.pacc);
         let (springs, x, sacc, pacc) = (&packed.springs, &packed.x, &self.sdv, &self.pacc);
         let body = |(k, out): (usize, &mut f64)| {
@@ -342,7 +364,11 @@ impl Solver {
         if self.force.len() < PAR_MIN {
             self.force.iter_mut().enumerate().for_each(body);
         } else {
-            self.force.par_iter_mut().enumerate().with_min_len(PAR_CHUNK).for_each(body);
+            self.force
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(body);
         }
     }
 

@@ -40,16 +40,24 @@ impl Xpbd {
             }
         };
         if x.len() < PAR_MIN {
-            x.iter_mut().zip(v.iter_mut()).zip(inv_mass.iter()).for_each(predict);
+            x.iter_mut()
+                .zip(v.iter_mut())
+                .zip(inv_mass.iter())
+                .for_each(predict);
         } else {
-            x.par_iter_mut().zip(v.par_iter_mut()).zip(inv_mass.par_iter()).with_min_len(PAR_CHUNK).for_each(predict);
+            x.par_iter_mut()
+                .zip(v.par_iter_mut())
+                .zip(inv_mass.par_iter())
+                .with_min_len(PAR_CHUNK)
+                .for_each(predict);
         }
         let prev = &self.prev;
         let inv_mass = &inv_mass[..];
         let springs = &springs[..];
         let xs = super::gauss_seidel::Disjoint::new(&mut x[..]);
         for c in 0..colouring.colours() {
-            let members = &colouring.springs[colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize];
+            let members = &colouring.springs
+                [colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize];
             let body = |&k: &u32| {
                 let s = &springs[k as usize];
                 if s.stiffness == 0.0 {
@@ -84,7 +92,11 @@ impl Xpbd {
         if v.len() < PAR_MIN {
             v.iter_mut().zip(x.iter()).enumerate().for_each(update);
         } else {
-            v.par_iter_mut().zip(x.par_iter()).enumerate().with_min_len(PAR_CHUNK).for_each(update);
+            v.par_iter_mut()
+                .zip(x.par_iter())
+                .enumerate()
+                .with_min_len(PAR_CHUNK)
+                .for_each(update);
         }
     }
 }

@@ -205,7 +205,8 @@ impl Scene {
             world: b.world,
             config: SimConfig {
                 dt: self.dt,
-                substeps: self.substeps,
+                substeps: self.substeps.unwrap_or(1),
+                auto_substeps: self.substeps.is_none(),
                 gravity: self.gravity.into(),
                 integrator,
                 exact_displacement: self.exact_displacement,

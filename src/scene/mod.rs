@@ -27,9 +27,6 @@ pub use build::BuiltScene;
 /// A vector as `(x, y, z)`.
 pub type V3 = [f64; 3];
 
-fn one() -> u32 {
-    1
-}
 fn yes() -> bool {
     true
 }
@@ -48,8 +45,9 @@ pub struct Scene {
     pub name: Option<String>,
     /// Frame step (s): one `Simulation::step` advances this much, in `substeps` substeps.
     pub dt: f64,
-    #[serde(default = "one")]
-    pub substeps: u32,
+    /// Substeps per frame; absent: chosen automatically to keep the integrator stable.
+    #[serde(default)]
+    pub substeps: Option<u32>,
     #[serde(default = "default_gravity")]
     pub gravity: V3,
     /// Integrator name; the engine's default (`harmonic`) when absent.

@@ -49,7 +49,7 @@ impl Scene {
     pub fn validate(&self) -> Vec<Issue> {
         let mut is = Issues(Vec::new());
         is.positive("dt", self.dt);
-        if self.substeps == 0 {
+        if self.substeps == Some(0) {
             is.push("substeps", "must be ≥ 1");
         }
         is.finite("gravity", self.gravity);

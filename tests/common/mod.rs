@@ -26,7 +26,7 @@ pub fn pair(
     let (xa, xb) = (-(l0 + d0) * mb / (ma + mb), (l0 + d0) * ma / (ma + mb));
     let (va, vb) = (-v0 * mb / (ma + mb), v0 * ma / (ma + mb));
     let text = format!(
-        "Scene(dt: {h:e}, gravity: (0.0, 0.0, 0.0), integrator: \"{integrator}\", exact_displacement: {exact},
+        "Scene(dt: {h:e}, substeps: 1, gravity: (0.0, 0.0, 0.0), integrator: \"{integrator}\", exact_displacement: {exact},
           particles: [(position: ({xa:e}, 0.0, 0.0), velocity: ({va:e}, 0.0, 0.0), mass: {ma:e}),
                       (position: ({xb:e}, 0.0, 0.0), velocity: ({vb:e}, 0.0, 0.0), mass: {mb:e})],
           springs: [(a: 0, b: 1, stiffness: {k:e}, damping: {c:e}, rest_length: {l0:e})])"

@@ -1,0 +1,85 @@
+//! Automatic step control: the network frequency estimate against a closed form, and every
+//! hard case bounded at its default settings although its dt is 8.0625 h_c.
+
+use std::path::Path;
+
+use harmonic::buffers::Packed;
+use harmonic::prelude::*;
+use harmonic::step_control;
+
+#[test]
+fn network_frequency_matches_the_free_chain_closed_form() {
+    // N equal masses in a line, free: ω_k = 2√(κ/m) sin(kπ/(2N)), highest at k = N − 1.
+    let (n, k, m) = (10usize, 400.0f64, 0.5f64);
+    let particles: String = (0..n)
+        .map(|i| format!("(position: ({i}.0, 0.0, 0.0), mass: {m}),"))
+        .collect();
+    let springs: String = (0..n - 1)
+        .map(|i| format!("(a: {i}, b: {}, stiffness: {k}),", i + 1))
+        .collect();
+    let text = format!(
+        "Scene(dt: 0.01, gravity: (0.0, 0.0, 0.0), particles: [{particles}], springs: [{springs}])"
+    );
+    let scene = Scene::parse(&text, "line").unwrap();
+    let p = Packed::gather(&scene.build().world).unwrap();
+    let exact =
+        2.0 * (k / m).sqrt() * ((n - 1) as f64 * std::f64::consts::PI / (2.0 * n as f64)).sin();
+    let est = step_control::network_frequency(&p, 2000);
+    println!("ω_max: estimate {est}, exact {exact}");
+    assert!((est / exact - 1.0).abs() < 1e-3, "{est} vs {exact}");
+}
+
+#[test]
+fn aliasing_is_flagged_near_whole_multiples_of_h_c() {
+    let scene = Scene::load("scenes/paper_fig3_integer_multiple.ron").unwrap();
+    let p = Packed::gather(&scene.build().world).unwrap();
+    // κ = π², μ = 1: h_c = 1 s.
+    assert_eq!(step_control::aliasing(&p, 2.0, 0.02).map(|a| a.0), Some(0));
+    assert_eq!(step_control::aliasing(&p, 3.01, 0.02).map(|a| a.0), Some(0));
+    assert_eq!(step_control::aliasing(&p, 2.5, 0.02), None);
+    assert_eq!(step_control::aliasing(&p, 0.3, 0.02), None);
+}
+
+#[test]
+fn unconditionally_stable_integrators_take_one_substep() {
+    let mut scene = Scene::load("scenes/hard/chain20_z0_rest.ron").unwrap();
+    scene.integrator = Some("implicit-euler".into());
+    assert_eq!(Simulation::from_scene(&scene).unwrap().config().substeps, 1);
+    scene.integrator = Some("symplectic-euler".into());
+    assert!(Simulation::from_scene(&scene).unwrap().config().substeps > 8);
+}
+
+#[test]
+fn every_hard_case_stays_bounded_with_default_settings() {
+    let mut files: Vec<_> = std::fs::read_dir(Path::new("scenes/hard"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 64);
+    for path in files {
+        let scene = Scene::load(&path).unwrap();
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        let choice = *sim
+            .step_choice()
+            .expect("hard cases leave substeps to the controller");
+        let frames = (scene.seconds.unwrap() / scene.dt).ceil() as usize;
+        let mut max_strain: f64 = 0.0;
+        for _ in 0..frames {
+            sim.step()
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            max_strain = max_strain.max(sim.diagnostics().max_strain);
+        }
+        assert!(
+            max_strain < 0.5,
+            "{}: max strain {max_strain}",
+            path.display()
+        );
+        println!(
+            "{}: {} substeps, max strain {:.4}",
+            path.display(),
+            choice.substeps,
+            max_strain
+        );
+    }
+}
