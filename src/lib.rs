@@ -30,6 +30,7 @@
 //! assert!((sag - 9.81 / 1000.0).abs() < 1e-3, "{sag}");
 //! ```
 
+pub mod accuracy;
 pub mod bench;
 pub mod buffers;
 pub mod components;

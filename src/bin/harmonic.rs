@@ -44,8 +44,20 @@ enum Command {
         #[arg(long)]
         write_scenes: Option<PathBuf>,
     },
-    /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
+    /// Speed against error: every integrator at several steps on the bench scenes, against an
+    /// RK4 reference. Writes CSV, Markdown and log-log charts (SVG, PNG) into --out.
     Bench {
+        /// Skip the 128×128 cloth.
+        #[arg(long)]
+        quick: bool,
+        /// Timed repeats per run; the median is reported.
+        #[arg(long, default_value_t = 3)]
+        repeats: u32,
+        #[arg(long, default_value = "bench-out")]
+        out: PathBuf,
+    },
+    /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
+    Throughput {
         /// Cloth resolution N (N×N particles).
         #[arg(long, default_value_t = 128)]
         size: u32,
@@ -113,7 +125,8 @@ fn main() -> ExitCode {
                 None => Ok(()),
             }
         }
-        Command::Bench {
+        Command::Bench { quick, repeats, out } => bench_report(quick, repeats, &out),
+        Command::Throughput {
             size,
             substeps,
             repeats,
@@ -129,6 +142,40 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), String> {
+    use std::io::IsTerminal;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let bar = std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new(1);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar
+    });
+    let (rows, refs) = harmonic::accuracy::measure(quick, repeats, |done, total, label| match &bar {
+        Some(b) => {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+            b.set_message(label.to_string());
+        }
+        None => eprintln!("[{done}/{total}] {label}"),
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let md = harmonic::accuracy::markdown(&rows, &refs);
+    let write = |name: &str, text: &str| std::fs::write(out.join(name), text).map_err(|e| format!("{}: {e}", out.join(name).display()));
+    write("bench.csv", &harmonic::accuracy::csv(&rows))?;
+    write("bench.md", &md)?;
+    for (scene, _, _) in &refs {
+        harmonic::accuracy::chart(&rows, scene, &out.join(format!("{scene}.svg")), &out.join(format!("{scene}.png")))?;
+    }
+    print!("{md}");
+    println!("wrote {}/bench.csv, bench.md and a chart per scene (SVG, PNG)", out.display());
+    Ok(())
 }
 
 fn parse_integrators(names: &[String]) -> Result<Vec<Integrator>, String> {

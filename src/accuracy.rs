@@ -1,0 +1,352 @@
+//! `harmonic bench`: speed against error. For each scene, integrator and step: wall time per
+//! simulated second, RMS position error at t = 1 s against a converged RK4 reference, max strain
+//! against the static strain, energy drift, and whether it stayed bounded.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use glam::DVec3;
+
+use crate::buffers::Packed;
+use crate::integrate::{Integrator, Solver};
+use crate::scene::{Anchor, Cloth, Plane, Rope, Scene, SpringSpec};
+use crate::{metrics, stability, statics, step_control};
+
+/// Simulated time of every run (s).
+pub const T: f64 = 1.0;
+
+/// A bench scene.
+pub struct Case {
+    pub name: &'static str,
+    pub scene: Scene,
+}
+
+fn spec(stiffness: f64, zeta: f64) -> SpringSpec {
+    SpringSpec {
+        stiffness: Some(stiffness),
+        damping_ratio: Some(zeta),
+        ..Default::default()
+    }
+}
+
+fn empty(gravity: [f64; 3]) -> Scene {
+    Scene {
+        name: None,
+        dt: T,
+        substeps: Some(1),
+        gravity,
+        integrator: None,
+        exact_displacement: false,
+        seconds: Some(T),
+        particles: vec![],
+        springs: vec![],
+        cloths: vec![],
+        ropes: vec![],
+    }
+}
+
+/// A horizontal `n`×`n` cloth, 1 m and 1 kg, pinned at two adjacent corners, released flat: it
+/// swings down through large 3-D motion. Structural, shear and bend springs, ζ = 0.2.
+pub fn swinging_cloth(n: u32, stiffness: f64) -> Scene {
+    let mut s = empty([0.0, -9.81, 0.0]);
+    s.cloths = vec![Cloth {
+        origin: [-0.5, 1.0, -0.5],
+        size: (1.0, 1.0),
+        resolution: (n, n),
+        plane: Plane::Horizontal,
+        mass: 1.0,
+        structural: spec(stiffness, 0.2),
+        shear: Some(spec(stiffness, 0.2)),
+        bend: Some(spec(stiffness / 4.0, 0.2)),
+        pins: vec![Anchor::TopLeft, Anchor::TopRight],
+        velocity: [0.0; 3],
+    }];
+    s
+}
+
+/// A 20-link chain released horizontally from a pin, ζ = 0.2.
+pub fn swinging_chain() -> Scene {
+    let mut s = empty([0.0, -9.81, 0.0]);
+    s.ropes = vec![Rope {
+        start: [0.0; 3],
+        end: [1.0, 0.0, 0.0],
+        particles: 21,
+        mass: 0.5,
+        spring: spec(2e4, 0.2),
+        pin_start: true,
+        pin_end: false,
+        bend: None,
+    }];
+    s
+}
+
+pub fn cases(quick: bool) -> Vec<Case> {
+    let mut v = vec![
+        Case { name: "chain20", scene: swinging_chain() },
+        Case { name: "cloth16", scene: swinging_cloth(16, 500.0) },
+    ];
+    if !quick {
+        v.push(Case { name: "cloth128", scene: swinging_cloth(128, 2000.0) });
+    }
+    v
+}
+
+pub const CONTENDERS: [Integrator; 7] = [
+    Integrator::Harmonic,
+    Integrator::HarmonicGs,
+    Integrator::HarmonicForced,
+    Integrator::HarmonicForcedGs,
+    Integrator::SymplecticEuler,
+    Integrator::ImplicitEuler,
+    Integrator::Xpbd,
+];
+
+/// One measured run.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub scene: &'static str,
+    pub integrator: String,
+    /// Steps per simulated second.
+    pub steps: u64,
+    /// `h/h_c` of the stiffest spring.
+    pub step_ratio: f64,
+    /// Median wall time per simulated second (s).
+    pub wall: f64,
+    pub rms_error: f64,
+    pub max_strain: f64,
+    pub static_strain: f64,
+    pub energy_drift: f64,
+    pub stable: bool,
+}
+
+/// Positions at `T` after `steps` steps; `None` if it blew up. Also max strain and energy drift.
+fn simulate(packed: &Packed, integrator: Integrator, g: DVec3, steps: u64, e_ref: f64) -> Option<(Vec<DVec3>, f64, f64)> {
+    let h = T / steps as f64;
+    let mut p = packed.clone();
+    let mut solver = Solver::new(integrator, false, g);
+    solver.prepare(&p, h).ok()?;
+    let e0 = metrics::energy(&p, g);
+    let mut max_strain = metrics::max_strain(&p);
+    for _ in 0..steps {
+        solver.substep(&mut p, h).ok()?;
+        let strain = metrics::max_strain(&p);
+        if !(strain <= stability::BLOWUP_STRAIN) {
+            return None;
+        }
+        max_strain = max_strain.max(strain);
+    }
+    metrics::first_non_finite(&p).is_none().then(|| (p.x.clone(), max_strain, (metrics::energy(&p, g) - e0) / e_ref))
+}
+
+/// Median wall time of `repeats` bare runs (no diagnostics).
+fn time_runs(packed: &Packed, integrator: Integrator, g: DVec3, steps: u64, repeats: u32) -> f64 {
+    let h = T / steps as f64;
+    let mut samples: Vec<f64> = (0..repeats.max(1))
+        .map(|_| {
+            let mut p = packed.clone();
+            let mut solver = Solver::new(integrator, false, g);
+            let _ = solver.prepare(&p, h);
+            let t = Instant::now();
+            for _ in 0..steps {
+                let _ = solver.substep(&mut p, h);
+            }
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    samples.sort_by(f64::total_cmp);
+    samples[samples.len() / 2]
+}
+
+fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
+    (a.iter().zip(b).map(|(x, y)| (*x - *y).length_squared()).sum::<f64>() / a.len() as f64).sqrt()
+}
+
+/// Step counts per simulated second tried for an integrator: its automatic choice ×{½, 1, 2, 4}
+/// (½ probes the edge of its stability region), or a fixed ladder when it has no limit.
+fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
+    let c = step_control::choose(packed, integrator, T);
+    match c.limit {
+        Some(_) => {
+            let n = c.substeps as u64;
+            vec![(n / 2).max(1), n, 2 * n, 4 * n]
+        }
+        None => vec![30, 60, 120, 240, 480, 960],
+    }
+}
+
+/// The reference for a scene: RK4 at a quarter of its automatic step, and the RMS change
+/// when that step is halved (the reference's own error bound).
+pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64) {
+    let n = 4 * step_control::choose(packed, Integrator::Rk4, T).substeps as u64;
+    let a = simulate(packed, Integrator::Rk4, g, n, 1.0).expect("RK4 reference is stable").0;
+    let b = simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).expect("RK4 reference is stable").0;
+    let change = rms(&a, &b);
+    (b, 2 * n, change)
+}
+
+/// Runs every case; `progress` is told after each run (done, total, label).
+pub fn measure(quick: bool, repeats: u32, mut progress: impl FnMut(usize, usize, &str)) -> (Vec<Row>, Vec<(String, u64, f64)>) {
+    let cases = cases(quick);
+    let plan: Vec<(usize, Integrator, u64)> = cases
+        .iter()
+        .enumerate()
+        .flat_map(|(ci, case)| {
+            let p = Packed::gather(&case.scene.build().world).expect("bench scenes are consistent");
+            CONTENDERS.iter().flat_map(move |&i| ladder(&p, i).into_iter().map(move |n| (ci, i, n))).collect::<Vec<_>>()
+        })
+        .collect();
+    let total = plan.len() + cases.len();
+    let mut done = 0;
+    let mut rows = Vec::new();
+    let mut refs = Vec::new();
+    for (ci, case) in cases.iter().enumerate() {
+        let packed = Packed::gather(&case.scene.build().world).expect("bench scenes are consistent");
+        let g = DVec3::from(case.scene.gravity);
+        progress(done, total, &format!("{}: RK4 reference", case.name));
+        let (reference, ref_steps, ref_change) = reference(&packed, g);
+        done += 1;
+        refs.push((case.name.to_string(), ref_steps, ref_change));
+        let relaxed = statics::relax(&packed, g, 1e-8, 1_000_000);
+        let static_strain = statics::static_strain(&packed, &relaxed);
+        let e_ref = packed.mass.iter().filter(|m| m.is_finite()).sum::<f64>() * g.length() * 1.0;
+        let hc = stability::h_crit(&packed);
+        for &(_, integrator, steps) in plan.iter().filter(|r| r.0 == ci) {
+            progress(done, total, &format!("{}: {integrator} at {steps} steps/s", case.name));
+            let outcome = simulate(&packed, integrator, g, steps, e_ref);
+            let wall = if outcome.is_some() { time_runs(&packed, integrator, g, steps, repeats) } else { f64::NAN };
+            let (rms_error, max_strain, energy_drift, stable) = match outcome {
+                Some((x, s, e)) => (rms(&x, &reference), s, e, true),
+                None => (f64::NAN, f64::NAN, f64::NAN, false),
+            };
+            rows.push(Row {
+                scene: case.name,
+                integrator: integrator.name().to_string(),
+                steps,
+                step_ratio: T / steps as f64 / hc,
+                wall,
+                rms_error,
+                max_strain,
+                static_strain,
+                energy_drift,
+                stable,
+            });
+            done += 1;
+        }
+    }
+    progress(done, total, "done");
+    (rows, refs)
+}
+
+pub fn csv(rows: &[Row]) -> String {
+    let mut out = String::from("scene,integrator,steps_per_s,h_over_hc,wall_s_per_sim_s,rms_error_m,max_strain,static_strain,energy_drift,stable\n");
+    for r in rows {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{}",
+            r.scene, r.integrator, r.steps, r.step_ratio, r.wall, r.rms_error, r.max_strain, r.static_strain, r.energy_drift, r.stable
+        );
+    }
+    out
+}
+
+/// The fastest stable row of a scene within `max_error` (m) RMS and `max_strain_error`
+/// (absolute, e.g. 0.01 = 1 percentage point) of the reference's max strain.
+pub fn fastest_within<'a>(rows: &'a [Row], scene: &str, max_error: f64, reference_strain: f64, max_strain_error: f64) -> Option<&'a Row> {
+    rows.iter()
+        .filter(|r| r.scene == scene && r.stable && r.rms_error <= max_error && (r.max_strain - reference_strain).abs() <= max_strain_error)
+        .min_by(|a, b| a.wall.total_cmp(&b.wall))
+}
+
+pub fn markdown(rows: &[Row], refs: &[(String, u64, f64)]) -> String {
+    let mut out = String::new();
+    for (scene, ref_steps, ref_change) in refs {
+        let smallest = rows.iter().filter(|r| &r.scene == scene && r.stable).map(|r| r.rms_error).fold(f64::INFINITY, f64::min);
+        let _ = writeln!(out, "### {scene}\n");
+        let _ = writeln!(
+            out,
+            "Reference: RK4 at {ref_steps} steps/s; halving its step moves it by {ref_change:.2e} m RMS, {:.2}% of the smallest error below.\n",
+            100.0 * ref_change / smallest
+        );
+        let _ = writeln!(out, "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | static strain | energy drift | stable |");
+        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|");
+        for r in rows.iter().filter(|r| &r.scene == scene) {
+            if r.stable {
+                let _ = writeln!(
+                    out,
+                    "| {} | {} | {:.3} | {:.4} | {:.3e} | {:.4} | {:.4} | {:+.2e} | yes |",
+                    r.integrator, r.steps, r.step_ratio, r.wall, r.rms_error, r.max_strain, r.static_strain, r.energy_drift
+                );
+            } else {
+                let _ = writeln!(out, "| {} | {} | {:.3} | - | - | - | {:.4} | - | no |", r.integrator, r.steps, r.step_ratio, r.static_strain);
+            }
+        }
+        let _ = writeln!(out);
+    }
+    out
+}
+
+/// Log-log chart of wall time per simulated second against RMS error, one series per integrator.
+pub fn chart(rows: &[Row], scene: &str, svg: &Path, png: &Path) -> Result<(), String> {
+    use plotters::prelude::*;
+    // PNG text needs a font; the embedded one avoids depending on system fonts.
+    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+    let pts: Vec<&Row> = rows.iter().filter(|r| r.scene == scene && r.stable && r.rms_error > 0.0).collect();
+    if pts.is_empty() {
+        return Ok(());
+    }
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
+    for r in &pts {
+        x0 = x0.min(r.rms_error);
+        x1 = x1.max(r.rms_error);
+        y0 = y0.min(r.wall);
+        y1 = y1.max(r.wall);
+    }
+    let (x0, x1, y0, y1) = (x0 / 2.0, x1 * 2.0, y0 / 2.0, y1 * 2.0);
+    fn draw<DB: DrawingBackend>(root: DrawingArea<DB, plotters::coord::Shift>, scene: &str, pts: &[&Row], range: (f64, f64, f64, f64)) -> Result<(), String>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (x0, x1, y0, y1) = range;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{scene}: speed against error (t = 1 s)"), ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("RMS position error against the RK4 reference (m)")
+            .y_desc("wall time per simulated second (s)")
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let mut names: Vec<&str> = pts.iter().map(|r| r.integrator.as_str()).collect();
+        names.dedup();
+        for (k, name) in names.iter().enumerate() {
+            let colour = Palette99::pick(k).to_rgba();
+            let series: Vec<(f64, f64)> = pts.iter().filter(|r| r.integrator == *name).map(|r| (r.rms_error, r.wall)).collect();
+            chart
+                .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
+                .map_err(|e| e.to_string())?
+                .label(*name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2)));
+            chart.draw_series(series.iter().map(|&p| Circle::new(p, 4, colour.filled()))).map_err(|e| e.to_string())?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(|e| e.to_string())?;
+        root.present().map_err(|e| e.to_string())
+    }
+    let range = (x0, x1, y0, y1);
+    draw(SVGBackend::new(svg, (900, 600)).into_drawing_area(), scene, &pts, range)?;
+    draw(BitMapBackend::new(png, (900, 600)).into_drawing_area(), scene, &pts, range)?;
+    Ok(())
+}
