@@ -37,6 +37,8 @@ pub mod components;
 pub mod error;
 pub mod integrate;
 pub mod metrics;
+#[cfg(feature = "rapier")]
+pub mod peer;
 pub mod scene;
 pub mod schedule;
 mod simulation;

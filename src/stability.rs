@@ -15,13 +15,14 @@ use crate::statics;
 pub const RATIOS: [f64; 8] = [0.25, 0.5, 1.0, 2.0, 2.0625, 4.0, 6.0625, 8.0625];
 
 /// Integrators the suite compares (RK4 is the reference, not a contender).
-pub const CONTENDERS: [Integrator; 9] = [
+pub const CONTENDERS: [Integrator; 10] = [
     Integrator::SymplecticEuler,
     Integrator::ExplicitEuler,
     Integrator::Harmonic,
     Integrator::HarmonicGs,
     Integrator::HarmonicForced,
     Integrator::HarmonicForcedGs,
+    Integrator::HarmonicSgs,
     Integrator::ImplicitEuler,
     Integrator::Xpbd,
     Integrator::HarmonicPaper,
@@ -507,12 +508,13 @@ pub fn report(opts: &Options) -> String {
         out,
         "Each cell: ours (numpy study's figure from MATH.md).\n"
     );
-    let columns: [(&str, Integrator, bool); 9] = [
+    let columns: [(&str, Integrator, bool); 10] = [
         ("symplectic Euler", Integrator::SymplecticEuler, false),
         ("harmonic (Jacobi)", Integrator::Harmonic, false),
         ("harmonic-forced", Integrator::HarmonicForced, false),
         ("harmonic-gs", Integrator::HarmonicGs, false),
         ("harmonic-forced-gs", Integrator::HarmonicForcedGs, false),
+        ("harmonic-sgs", Integrator::HarmonicSgs, false),
         ("harmonic, exact displacement", Integrator::Harmonic, true),
         ("explicit Euler", Integrator::ExplicitEuler, false),
         ("implicit-euler", Integrator::ImplicitEuler, false),

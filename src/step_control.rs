@@ -74,6 +74,7 @@ pub fn stable_omega_h(integrator: Integrator, zeta: f64) -> Option<f64> {
         Integrator::Harmonic | Integrator::HarmonicPaper => TABLE_H,
         Integrator::HarmonicForced => TABLE_HF,
         Integrator::HarmonicGs => TABLE_GS,
+        Integrator::HarmonicSgs => TABLE_SGS,
         Integrator::HarmonicForcedGs => TABLE_FGS,
         Integrator::Rk4 => TABLE_RK4,
     };
@@ -91,6 +92,8 @@ pub const TABLE_H: [f64; 4] = [1.453, 1.132, 0.524, 0.287];
 pub const TABLE_HF: [f64; 4] = [1.614, 1.614, 0.515, 0.262];
 /// Held by the single spring's plain-update limit at low damping; no limit measured at ζ = 2.
 pub const TABLE_GS: [f64; 4] = [1.72, 1.971, 8.885, 20.0];
+/// Symmetric sweeps: the single spring caps it at h = h_c (ω h = π) when lightly damped.
+pub const TABLE_SGS: [f64; 4] = [std::f64::consts::PI, 3.208, 8.885, 20.0];
 pub const TABLE_FGS: [f64; 4] = [1.72, 1.614, 0.515, 0.262];
 pub const TABLE_RK4: [f64; 4] = [2.822, 2.661, 0.684, 0.321];
 

@@ -87,6 +87,7 @@ fn integrators_converge_at_their_order() {
         (Integrator::Harmonic, false, n_small, 1.0),
         (Integrator::Harmonic, true, n_small, 1.0),
         (Integrator::HarmonicGs, false, n_small, 1.0),
+        (Integrator::HarmonicSgs, false, n_small, 1.0),
         (Integrator::HarmonicForced, false, n_small, 1.0),
         (Integrator::HarmonicForcedGs, false, n_small, 1.0),
         (Integrator::ImplicitEuler, false, n_small, 1.0),

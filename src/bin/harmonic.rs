@@ -125,7 +125,11 @@ fn main() -> ExitCode {
                 None => Ok(()),
             }
         }
-        Command::Bench { quick, repeats, out } => bench_report(quick, repeats, &out),
+        Command::Bench {
+            quick,
+            repeats,
+            out,
+        } => bench_report(quick, repeats, &out),
         Command::Throughput {
             size,
             substeps,
@@ -155,26 +159,38 @@ fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), 
         );
         bar
     });
-    let (rows, refs) = harmonic::accuracy::measure(quick, repeats, |done, total, label| match &bar {
-        Some(b) => {
-            b.set_length(total as u64);
-            b.set_position(done as u64);
-            b.set_message(label.to_string());
-        }
-        None => eprintln!("[{done}/{total}] {label}"),
-    });
+    let (rows, refs) =
+        harmonic::accuracy::measure(quick, repeats, |done, total, label| match &bar {
+            Some(b) => {
+                b.set_length(total as u64);
+                b.set_position(done as u64);
+                b.set_message(label.to_string());
+            }
+            None => eprintln!("[{done}/{total}] {label}"),
+        });
     if let Some(b) = bar {
         b.finish_and_clear();
     }
     let md = harmonic::accuracy::markdown(&rows, &refs);
-    let write = |name: &str, text: &str| std::fs::write(out.join(name), text).map_err(|e| format!("{}: {e}", out.join(name).display()));
+    let write = |name: &str, text: &str| {
+        std::fs::write(out.join(name), text)
+            .map_err(|e| format!("{}: {e}", out.join(name).display()))
+    };
     write("bench.csv", &harmonic::accuracy::csv(&rows))?;
     write("bench.md", &md)?;
     for (scene, _, _) in &refs {
-        harmonic::accuracy::chart(&rows, scene, &out.join(format!("{scene}.svg")), &out.join(format!("{scene}.png")))?;
+        harmonic::accuracy::chart(
+            &rows,
+            scene,
+            &out.join(format!("{scene}.svg")),
+            &out.join(format!("{scene}.png")),
+        )?;
     }
     print!("{md}");
-    println!("wrote {}/bench.csv, bench.md and a chart per scene (SVG, PNG)", out.display());
+    println!(
+        "wrote {}/bench.csv, bench.md and a chart per scene (SVG, PNG)",
+        out.display()
+    );
     Ok(())
 }
 

@@ -42,7 +42,7 @@ impl<'a, T> Disjoint<'a, T> {
 
 /// One sweep over all colours: `φ = p δ + q δ̇ + s a` per spring (with `a` the frozen relative
 /// acceleration from everything else when `forcing` is given), applied to both ends at once.
-pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>) {
+pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>, reverse: bool) {
     let Packed {
         x,
         v,
@@ -52,7 +52,9 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
     } = packed;
     let (x, springs) = (&x[..], &springs[..]);
     let v = Disjoint::new(&mut v[..]);
-    for c in 0..colouring.colours() {
+    let colours = colouring.colours();
+    for i in 0..colours {
+        let c = if reverse { colours - 1 - i } else { i };
         let range = colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize;
         let members = &colouring.springs[range];
         let body = |&k: &u32| {

@@ -37,6 +37,9 @@ pub enum Integrator {
     HarmonicForced,
     /// Forced, in Gauss–Seidel order.
     HarmonicForcedGs,
+    /// Symmetric Gauss–Seidel: a forward then a backward colour sweep, each applying half of
+    /// the closed-form impulse for the full step.
+    HarmonicSgs,
     /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
     ImplicitEuler,
     /// Small-step XPBD, one iteration per substep.
@@ -44,9 +47,10 @@ pub enum Integrator {
 }
 
 impl Integrator {
-    pub const ALL: [Integrator; 10] = [
+    pub const ALL: [Integrator; 11] = [
         Integrator::Harmonic,
         Integrator::HarmonicGs,
+        Integrator::HarmonicSgs,
         Integrator::HarmonicForced,
         Integrator::HarmonicForcedGs,
         Integrator::HarmonicPaper,
@@ -65,6 +69,7 @@ impl Integrator {
             Integrator::ExplicitEuler => "explicit-euler",
             Integrator::Rk4 => "rk4",
             Integrator::HarmonicGs => "harmonic-gs",
+            Integrator::HarmonicSgs => "harmonic-sgs",
             Integrator::HarmonicForced => "harmonic-forced",
             Integrator::HarmonicForcedGs => "harmonic-forced-gs",
             Integrator::ImplicitEuler => "implicit-euler",
@@ -91,6 +96,8 @@ impl FromStr for Integrator {
 
 /// Below this many elements a pass runs on the calling thread: rayon's fork costs more.
 pub(crate) const PAR_MIN: usize = 4096;
+/// Sweeps of `harmonic-sgs`, alternating direction, each applying 1/SGS_SWEEPS of the impulse.
+pub const SGS_SWEEPS: usize = 2;
 pub(crate) const PAR_CHUNK: usize = 1024;
 
 /// Whether any pass over this scene goes to rayon's pool.
@@ -199,6 +206,16 @@ impl Solver {
         self.pacc.resize(if forced { n } else { 0 }, DVec3::ZERO);
         self.force.resize(if forced { m } else { 0 }, 0.0);
         match self.integrator {
+            Integrator::HarmonicSgs => self.lin.extend(packed.springs.iter().map(|s| {
+                let l = harmonic::harmonic(s.omega0_sq(), s.alpha(), h);
+                let k = SGS_SWEEPS as f64;
+                Linear {
+                    p: l.p / k,
+                    q: l.q / k,
+                    r: 0.0,
+                    s: 0.0,
+                }
+            })),
             Integrator::Harmonic
             | Integrator::HarmonicGs
             | Integrator::HarmonicForced
@@ -309,7 +326,14 @@ impl Solver {
             Integrator::Rk4 => self.rk4(packed, h),
             Integrator::HarmonicGs => {
                 gauss_seidel::add_gravity(packed, g, h);
-                gauss_seidel::sweep(packed, &self.lin, None);
+                gauss_seidel::sweep(packed, &self.lin, None, false);
+                gauss_seidel::drift(packed, h);
+            }
+            Integrator::HarmonicSgs => {
+                gauss_seidel::add_gravity(packed, g, h);
+                for k in 0..SGS_SWEEPS {
+                    gauss_seidel::sweep(packed, &self.lin, None, k % 2 == 1);
+                }
                 gauss_seidel::drift(packed, h);
             }
             Integrator::HarmonicForced => {
@@ -328,7 +352,7 @@ impl Solver {
             Integrator::HarmonicForcedGs => {
                 self.freeze_forcing(packed);
                 // Gravity is in the forcing; it reaches the velocities after the sweep.
-                gauss_seidel::sweep(packed, &self.lin, Some(&self.force));
+                gauss_seidel::sweep(packed, &self.lin, Some(&self.force), false);
                 gauss_seidel::add_gravity(packed, g, h);
                 gauss_seidel::drift(packed, h);
             }

@@ -1,0 +1,93 @@
+//! rapier 0.36's own soft-body cloth (`SoftBodyBuilder::cloth`) on the same cloth, so the
+//! speed-against-error report can place it beside ours (feature `rapier`).
+//!
+//! rapier solves each edge as a soft distance constraint whose stiffness is a natural
+//! frequency and damping ratio normalised by the constraint's effective mass, which for a
+//! free pair is the reduced mass μ: the same `ω0 = √(κ/μ)` and `ζ` as ours. Its structural
+//! and shear edges share `edge_softness`, the skip-one edges `bend_softness`.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rapier3d::prelude::*;
+
+use crate::scene::{Anchor, Cloth, Plane};
+
+/// Positions at `seconds` (in our cloth's particle order) and the wall time of the steps.
+/// `substeps` is rapier's `num_solver_iterations` per 1/60 s step (its default is 4).
+pub fn run_cloth(
+    cloth: &Cloth,
+    gravity: DVec3,
+    seconds: f64,
+    substeps: usize,
+) -> Result<(Vec<DVec3>, f64), String> {
+    let (cols, rows) = (cloth.resolution.0 as usize, cloth.resolution.1 as usize);
+    if cloth
+        .pins
+        .iter()
+        .any(|p| !matches!(p, Anchor::TopLeft | Anchor::TopRight))
+    {
+        return Err("the rapier peer maps cloths pinned at their top corners only".into());
+    }
+    let m = cloth.mass / (cols * rows) as f64;
+    let mu = m / 2.0;
+    let material = |s: &crate::scene::SpringSpec| {
+        let (k, c) = s.resolve(m, m);
+        let w0 = (k / mu).sqrt();
+        SpringCoefficients::new(
+            (w0 / (2.0 * std::f64::consts::PI)) as f32,
+            (c / (2.0 * (k * mu).sqrt())) as f32,
+        )
+    };
+    let edge = material(&cloth.structural);
+    let bend = cloth.bend.as_ref().map_or(edge, material);
+    let du = Vector::new((cloth.size.0 / (cols - 1) as f64) as f32, 0.0, 0.0);
+    let step = (cloth.size.1 / (rows - 1) as f64) as f32;
+    let dv = match cloth.plane {
+        Plane::Horizontal => Vector::new(0.0, 0.0, step),
+        Plane::Vertical => Vector::new(0.0, -step, 0.0),
+    };
+    let origin = Vector::new(
+        cloth.origin[0] as f32,
+        cloth.origin[1] as f32,
+        cloth.origin[2] as f32,
+    );
+    // rapier's particle (i, j) = origin + i du + j dv has index i·rows + j; ours (col, row) is row·cols + col.
+    let rapier_index = |col: usize, row: usize| col * rows + row;
+    let mut pins = Vec::new();
+    for p in &cloth.pins {
+        pins.push(match p {
+            Anchor::TopLeft => rapier_index(0, 0) as u32,
+            _ => rapier_index(cols - 1, 0) as u32,
+        });
+    }
+    let builder = SoftBodyBuilder::cloth(origin, du, dv, cols, rows)
+        .mass(cloth.mass as f32)
+        .pinned_particles(pins)
+        .material(SoftBodyMaterial {
+            edge_softness: edge,
+            bend_softness: bend,
+            ..Default::default()
+        })
+        .no_surface_collider();
+    let mut world = PhysicsWorld::new();
+    world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
+    world.integration_parameters.num_solver_iterations = substeps;
+    let dt = world.integration_parameters.dt as f64;
+    let handle = world.insert_soft_body(builder);
+    let frames = (seconds / dt).round() as usize;
+    let t = Instant::now();
+    for _ in 0..frames {
+        world.step();
+    }
+    let wall = t.elapsed().as_secs_f64();
+    let body = &world.soft_bodies[handle];
+    let mut out = vec![DVec3::ZERO; cols * rows];
+    for row in 0..rows {
+        for col in 0..cols {
+            let p = body.particle_position(rapier_index(col, row));
+            out[row * cols + col] = DVec3::new(p.x as f64, p.y as f64, p.z as f64);
+        }
+    }
+    Ok((out, wall))
+}
