@@ -226,18 +226,26 @@ fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
 /// The reference for a scene: RK4 at a quarter of its automatic step (an eighth on small scenes), and
 /// the RMS change from the run at twice that step (a bound on the reference's own error,
 /// about 1/15 of it for a fourth-order method).
-pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64) {
+pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64, f64) {
     let factor = if packed.springs.len() > LARGE { 2 } else { 4 };
     let n = factor * step_control::choose(packed, Integrator::Rk4, T).substeps as u64;
     // `n` steps; the reference itself takes 2n.
     let a = simulate(packed, Integrator::Rk4, g, n, 1.0)
         .expect("RK4 reference is stable")
         .0;
-    let b = simulate(packed, Integrator::Rk4, g, 2 * n, 1.0)
-        .expect("RK4 reference is stable")
-        .0;
+    let (b, max_strain, _) =
+        simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).expect("RK4 reference is stable");
     let change = rms(&a, &b);
-    (b, 2 * n, change)
+    (b, 2 * n, change, max_strain)
+}
+
+/// A scene's reference run: steps per second, RMS change when its step is halved, max strain.
+#[derive(Clone, Debug)]
+pub struct Reference {
+    pub scene: &'static str,
+    pub steps: u64,
+    pub change: f64,
+    pub max_strain: f64,
 }
 
 /// Runs every case; `progress` is told after each run (done, total, label).
@@ -245,7 +253,7 @@ pub fn measure(
     quick: bool,
     repeats: u32,
     mut progress: impl FnMut(usize, usize, &str),
-) -> (Vec<Row>, Vec<(String, u64, f64)>) {
+) -> (Vec<Row>, Vec<Reference>) {
     let cases = cases(quick);
     let plan: Vec<(usize, Integrator, u64)> = cases
         .iter()
@@ -272,9 +280,14 @@ pub fn measure(
             Packed::gather(&case.scene.build().world).expect("bench scenes are consistent");
         let g = DVec3::from(case.scene.gravity);
         progress(done, total, &format!("{}: RK4 reference", case.name));
-        let (reference, ref_steps, ref_change) = reference(&packed, g);
+        let (reference, steps, change, max_strain) = reference(&packed, g);
         done += 1;
-        refs.push((case.name.to_string(), ref_steps, ref_change));
+        refs.push(Reference {
+            scene: case.name,
+            steps,
+            change,
+            max_strain,
+        });
         progress(done, total, &format!("{}: static equilibrium", case.name));
         // Net acceleration below 1e-5 g: well under the strain digits reported.
         let relaxed = statics::relax(&packed, g, 1e-5 * g.length(), 400_000);
@@ -412,9 +425,14 @@ pub fn fastest_within<'a>(
         .min_by(|a, b| a.wall.total_cmp(&b.wall))
 }
 
-pub fn markdown(rows: &[Row], refs: &[(String, u64, f64)]) -> String {
+/// The default-integrator rule: error ≤ 1 cm RMS and max strain within 1 percentage point.
+pub const RULE_ERROR: f64 = 0.01;
+pub const RULE_STRAIN: f64 = 0.01;
+
+pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
     let mut out = String::new();
-    for (scene, ref_steps, ref_change) in refs {
+    for reference in refs {
+        let scene = reference.scene;
         let smallest = rows
             .iter()
             .filter(|r| r.scene == scene && r.stable)
@@ -423,9 +441,27 @@ pub fn markdown(rows: &[Row], refs: &[(String, u64, f64)]) -> String {
         let _ = writeln!(out, "### {scene}\n");
         let _ = writeln!(
             out,
-            "Reference: RK4 at {ref_steps} steps/s; halving its step moves it by {ref_change:.2e} m RMS, {:.2}% of the smallest error below.\n",
-            100.0 * ref_change / smallest
+            "Reference: RK4 at {} steps/s, max strain {:.4}; halving its step moves it by {:.2e} m RMS, {:.2}% of the smallest error below.\n",
+            reference.steps,
+            reference.max_strain,
+            reference.change,
+            100.0 * reference.change / smallest
         );
+        match fastest_within(rows, scene, RULE_ERROR, reference.max_strain, RULE_STRAIN) {
+            Some(r) => {
+                let _ = writeln!(
+                    out,
+                    "Fastest within 1 cm RMS and 1 percentage point of strain: **{}** at {} steps/s, {:.3} s per simulated second.\n",
+                    r.integrator, r.steps, r.wall
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    out,
+                    "No run is within 1 cm RMS and 1 percentage point of strain.\n"
+                );
+            }
+        }
         let _ = writeln!(out, "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | static strain | energy drift | stable |");
         let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|");
         for r in rows.iter().filter(|r| r.scene == scene) {

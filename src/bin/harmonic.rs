@@ -178,7 +178,8 @@ fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), 
     };
     write("bench.csv", &harmonic::accuracy::csv(&rows))?;
     write("bench.md", &md)?;
-    for (scene, _, _) in &refs {
+    for r in &refs {
+        let scene = r.scene;
         harmonic::accuracy::chart(
             &rows,
             scene,
