@@ -191,7 +191,8 @@ fn time_runs(packed: &Packed, integrator: Integrator, g: DVec3, steps: u64, repe
     samples[samples.len() / 2]
 }
 
-fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
+/// RMS distance between two position sets of equal length.
+pub fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
     (a.iter()
         .zip(b)
         .map(|(x, y)| (*x - *y).length_squared())

@@ -90,6 +90,11 @@ impl Colouring {
         self.offsets.len().saturating_sub(1)
     }
 
+    /// The springs of colour `c`.
+    pub fn members(&self, c: usize) -> &[u32] {
+        &self.springs[self.offsets[c] as usize..self.offsets[c + 1] as usize]
+    }
+
     /// Greedy edge colouring in spring order (at most 2·max degree − 1 colours).
     fn build(n: usize, springs: &[PackedSpring]) -> Self {
         let mut degree = vec![0u32; n];

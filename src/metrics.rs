@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use crate::buffers::Packed;
 
-const PAR_MIN: usize = 4096;
+use crate::integrate::par::PAR_MIN;
 
 /// Kinetic + spring + gravitational potential energy (J); pinned particles hold none.
 /// Gravity's potential is `−m g·x`, zero at the origin.

@@ -1,6 +1,7 @@
 //! Every integrator converges to a fine-step RK4 reference at its order as h shrinks (and the
 //! paper's printed step does not converge at all).
 
+use harmonic::accuracy::rms;
 use harmonic::prelude::*;
 
 const T: f64 = 0.25;
@@ -38,15 +39,6 @@ fn sci(v: &[f64]) -> String {
         .map(|e| format!("{e:.3e}"))
         .collect::<Vec<_>>()
         .join(", ")
-}
-
-fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
-    (a.iter()
-        .zip(b)
-        .map(|(x, y)| (*x - *y).length_squared())
-        .sum::<f64>()
-        / a.len() as f64)
-        .sqrt()
 }
 
 /// Errors at N, 2N, 4N steps and the observed order log2(e(h)/e(h/2)) of the last halving.

@@ -4,10 +4,9 @@
 use std::marker::PhantomData;
 
 use glam::DVec3;
-use rayon::prelude::*;
 
 use super::harmonic::Linear;
-use super::{PAR_CHUNK, PAR_MIN};
+use super::par;
 use crate::buffers::Packed;
 
 /// A slice written from parallel tasks at indices that never collide.
@@ -55,9 +54,7 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
     let colours = colouring.colours();
     for i in 0..colours {
         let c = if reverse { colours - 1 - i } else { i };
-        let range = colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize;
-        let members = &colouring.springs[range];
-        let body = |&k: &u32| {
+        par::each_of(colouring.members(c), |&k| {
             let k = k as usize;
             let s = &springs[k];
             let (a, b) = (s.a as usize, s.b as usize);
@@ -75,51 +72,26 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
             }
             *va -= s.wa * phi * n;
             *vb += s.wb * phi * n;
-        };
-        if members.len() < PAR_MIN {
-            members.iter().for_each(body);
-        } else {
-            members.par_iter().with_min_len(PAR_CHUNK).for_each(body);
-        }
+        });
     }
 }
 
 /// `v += g h` on free particles.
 pub(super) fn add_gravity(packed: &mut Packed, g: DVec3, h: f64) {
     let Packed { v, inv_mass, .. } = packed;
-    let body = |(vi, &w): (&mut DVec3, &f64)| {
-        if w != 0.0 {
+    par::each(v, |i, vi| {
+        if inv_mass[i] != 0.0 {
             *vi += g * h;
         }
-    };
-    if v.len() < PAR_MIN {
-        v.iter_mut().zip(inv_mass.iter()).for_each(body);
-    } else {
-        v.par_iter_mut()
-            .zip(inv_mass.par_iter())
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    });
 }
 
 /// `x += h v` on free particles.
 pub(super) fn drift(packed: &mut Packed, h: f64) {
     let Packed { x, v, inv_mass, .. } = packed;
-    let body = |((xi, vi), &w): ((&mut DVec3, &DVec3), &f64)| {
-        if w != 0.0 {
-            *xi += h * *vi;
+    par::each(x, |i, xi| {
+        if inv_mass[i] != 0.0 {
+            *xi += h * v[i];
         }
-    };
-    if x.len() < PAR_MIN {
-        x.iter_mut()
-            .zip(v.iter())
-            .zip(inv_mass.iter())
-            .for_each(body);
-    } else {
-        x.par_iter_mut()
-            .zip(v.par_iter())
-            .zip(inv_mass.par_iter())
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    });
 }

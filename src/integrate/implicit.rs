@@ -10,7 +10,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::{PAR_CHUNK, PAR_MIN};
+use super::par;
 use crate::buffers::Packed;
 
 /// Relative residual at which CG stops.
@@ -60,11 +60,10 @@ impl Implicit {
     }
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
-        let n = packed.particle_count();
         let springs = &packed.springs;
         let (x, v) = (&packed.x, &packed.v);
         // Geometry, and per spring the force term `f_s + h K_s (v_b − v_a)` acting on b.
-        let geom = |(k, (ax, term)): (usize, (&mut (DVec3, f64), &mut DVec3))| {
+        par::each2(&mut self.axis, &mut self.term, |k, ax, term| {
             let s = &springs[k];
             let (a, b) = (s.a as usize, s.b as usize);
             let d = x[b] - x[a];
@@ -76,25 +75,11 @@ impl Implicit {
             let force = -(s.stiffness * (len - s.rest) + s.damping * nn.dot(dv)) * nn;
             let k_dv = -s.stiffness * (nn * nn.dot(dv) + t * (dv - nn * nn.dot(dv)));
             *term = force + h * k_dv;
-        };
-        if springs.len() < PAR_MIN {
-            self.axis
-                .iter_mut()
-                .zip(self.term.iter_mut())
-                .enumerate()
-                .for_each(geom);
-        } else {
-            self.axis
-                .par_iter_mut()
-                .zip(self.term.par_iter_mut())
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(geom);
-        }
+        });
         // rhs = h (m g + Σ ±term); preconditioner = 1 / diag(M + Σ B_s).
         {
             let (axis, term) = (&self.axis, &self.term);
-            let body = |(i, (rhs, pre)): (usize, (&mut DVec3, &mut DVec3))| {
+            par::each2(&mut self.rhs, &mut self.precond, |i, rhs, pre| {
                 if packed.inv_mass[i] == 0.0 {
                     *rhs = DVec3::ZERO;
                     *pre = DVec3::ZERO;
@@ -118,41 +103,18 @@ impl Implicit {
                 }
                 *rhs = h * f;
                 *pre = diag.recip();
-            };
-            if n < PAR_MIN {
-                self.rhs
-                    .iter_mut()
-                    .zip(self.precond.iter_mut())
-                    .enumerate()
-                    .for_each(body);
-            } else {
-                self.rhs
-                    .par_iter_mut()
-                    .zip(self.precond.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(PAR_CHUNK)
-                    .for_each(body);
-            }
+            });
         }
         self.solve(packed, h);
         // v += Δv; x += h v.
         let dv = &self.dv;
         let Packed { x, v, inv_mass, .. } = packed;
-        let body = |(i, (xi, vi)): (usize, (&mut DVec3, &mut DVec3))| {
+        par::each2(x, v, |i, xi, vi| {
             if inv_mass[i] != 0.0 {
                 *vi += dv[i];
                 *xi += h * *vi;
             }
-        };
-        if n < PAR_MIN {
-            x.iter_mut().zip(v.iter_mut()).enumerate().for_each(body);
-        } else {
-            x.par_iter_mut()
-                .zip(v.par_iter_mut())
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(body);
-        }
+        });
     }
 
     /// Preconditioned CG on `A Δv = rhs`, starting from `Δv = 0`.
@@ -185,41 +147,23 @@ impl Implicit {
             let beta = rz_new / rz;
             rz = rz_new;
             let z = &self.z;
-            let body = |(pi, zi): (&mut DVec3, &DVec3)| *pi = *zi + beta * *pi;
-            if z.len() < PAR_MIN {
-                self.p.iter_mut().zip(z.iter()).for_each(body);
-            } else {
-                self.p
-                    .par_iter_mut()
-                    .zip(z.par_iter())
-                    .with_min_len(PAR_CHUNK)
-                    .for_each(body);
-            }
+            par::each(&mut self.p, |i, pi| *pi = z[i] + beta * *pi);
         }
     }
 
     /// `ap = A p` without forming `A`.
     fn multiply(&mut self, packed: &Packed, h: f64) {
         let (springs, axis, p) = (&packed.springs, &self.axis, &self.p);
-        let per_spring = |(k, out): (usize, &mut DVec3)| {
+        par::each(&mut self.term, |k, out| {
             let s = &springs[k];
             let (nn, t) = axis[k];
             let du = p[s.b as usize] - p[s.a as usize];
             let along = nn * nn.dot(du);
             *out = h * s.damping * along + h * h * s.stiffness * (along + t * (du - along));
-        };
-        if springs.len() < PAR_MIN {
-            self.term.iter_mut().enumerate().for_each(per_spring);
-        } else {
-            self.term
-                .par_iter_mut()
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(per_spring);
-        }
+        });
         let term = &self.term;
         let inc = &packed.incidence;
-        let per_particle = |(i, out): (usize, &mut DVec3)| {
+        par::each(&mut self.ap, |i, out| {
             if packed.inv_mass[i] == 0.0 {
                 *out = DVec3::ZERO;
                 return;
@@ -231,42 +175,16 @@ impl Implicit {
                 sum += inc.coef[e].signum() * term[inc.spring[e] as usize];
             }
             *out = sum;
-        };
-        if p.len() < PAR_MIN {
-            self.ap.iter_mut().enumerate().for_each(per_particle);
-        } else {
-            self.ap
-                .par_iter_mut()
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(per_particle);
-        }
+        });
     }
 }
 
 fn apply_precond(pre: &[DVec3], r: &[DVec3], z: &mut [DVec3]) {
-    let body = |((zi, ri), pi): ((&mut DVec3, &DVec3), &DVec3)| *zi = *ri * *pi;
-    if z.len() < PAR_MIN {
-        z.iter_mut().zip(r).zip(pre).for_each(body);
-    } else {
-        z.par_iter_mut()
-            .zip(r.par_iter())
-            .zip(pre.par_iter())
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    par::each(z, |i, zi| *zi = r[i] * pre[i]);
 }
 
 fn axpy(alpha: f64, x: &[DVec3], y: &mut [DVec3]) {
-    let body = |(yi, xi): (&mut DVec3, &DVec3)| *yi += alpha * *xi;
-    if y.len() < PAR_MIN {
-        y.iter_mut().zip(x).for_each(body);
-    } else {
-        y.par_iter_mut()
-            .zip(x.par_iter())
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    par::each(y, |i, yi| *yi += alpha * x[i]);
 }
 
 /// Dot product with fixed chunking, so the result is bit-identical for any thread count.
@@ -276,7 +194,8 @@ fn dot(a: &[DVec3], b: &[DVec3], partial: &mut [f64]) -> f64 {
         let hi = (lo + DOT_CHUNK).min(a.len());
         *out = (lo..hi).map(|i| a[i].dot(b[i])).sum();
     };
-    if a.len() < PAR_MIN {
+    // Few partial sums, long chunks: go parallel on the length of the vectors.
+    if a.len() < par::PAR_MIN {
         partial.iter_mut().enumerate().for_each(body);
     } else {
         partial.par_iter_mut().enumerate().for_each(body);

@@ -4,13 +4,13 @@ mod gauss_seidel;
 pub mod harmonic;
 pub mod implicit;
 pub mod paper;
+pub(crate) mod par;
 pub mod xpbd;
 
 use std::fmt;
 use std::str::FromStr;
 
 use glam::DVec3;
-use rayon::prelude::*;
 
 use crate::buffers::{Packed, PackedSpring};
 use crate::error::SimError;
@@ -95,15 +95,12 @@ impl FromStr for Integrator {
     }
 }
 
-/// Below this many elements a pass runs on the calling thread: rayon's fork costs more.
-pub(crate) const PAR_MIN: usize = 4096;
 /// Sweeps of `harmonic-sgs`, alternating direction, each applying 1/SGS_SWEEPS of the impulse.
 pub const SGS_SWEEPS: usize = 2;
-pub(crate) const PAR_CHUNK: usize = 1024;
 
 /// Whether any pass over this scene goes to rayon's pool.
 pub fn runs_parallel(packed: &Packed) -> bool {
-    packed.particle_count() >= PAR_MIN || packed.springs.len() >= PAR_MIN
+    packed.particle_count() >= par::PAR_MIN || packed.springs.len() >= par::PAR_MIN
 }
 
 /// How a spring's relative velocity change is computed in the spring pass.
@@ -279,39 +276,24 @@ impl Solver {
         self.prepare(packed, h)?;
         let g = self.gravity;
         match self.integrator {
-            Integrator::Harmonic => {
-                let disp = self.exact_displacement;
-                let sdx = if disp { Some(&mut self.sdx[..]) } else { None };
+            Integrator::Harmonic | Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
+                // One pass shape; the coefficients (set in `prepare`) and the update differ.
+                let update = match self.integrator {
+                    Integrator::Harmonic if self.exact_displacement => Update::Exact,
+                    Integrator::ExplicitEuler => Update::PositionFirst,
+                    _ => Update::VelocityFirst,
+                };
+                let sdx = (update == Update::Exact).then_some(&mut self.sdx[..]);
+                let law = Law::Linear(&self.lin);
                 spring_pass(
                     &packed.springs,
                     &packed.x,
                     &packed.v,
-                    Law::Linear(&self.lin),
+                    law,
                     &mut self.sdv,
                     sdx,
                 );
-                let update = if disp {
-                    Update::Exact
-                } else {
-                    Update::VelocityFirst
-                };
                 particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
-            }
-            Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
-                spring_pass(
-                    &packed.springs,
-                    &packed.x,
-                    &packed.v,
-                    Law::Linear(&self.lin),
-                    &mut self.sdv,
-                    None,
-                );
-                let update = if self.integrator == Integrator::SymplecticEuler {
-                    Update::VelocityFirst
-                } else {
-                    Update::PositionFirst
-                };
-                particle_pass(packed, &self.sdv, &[], g, h, update);
             }
             Integrator::HarmonicPaper => {
                 spring_pass(
@@ -377,7 +359,7 @@ impl Solver {
         );
         acceleration(packed, &self.sdv, g, &mut self.pacc);
         let (springs, x, sacc, pacc) = (&packed.springs, &packed.x, &self.sdv, &self.pacc);
-        let body = |(k, out): (usize, &mut f64)| {
+        par::each(&mut self.force, |k, out| {
             let s = &springs[k];
             let (a, b) = (s.a as usize, s.b as usize);
             let n = (x[b] - x[a]).normalize();
@@ -385,16 +367,7 @@ impl Solver {
             let other_b = pacc[b] - s.wb * sacc[k];
             let other_a = pacc[a] + s.wa * sacc[k];
             *out = n.dot(other_b - other_a);
-        };
-        if self.force.len() < PAR_MIN {
-            self.force.iter_mut().enumerate().for_each(body);
-        } else {
-            self.force
-                .par_iter_mut()
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(body);
-        }
+        });
     }
 
     fn rk4(&mut self, packed: &mut Packed, h: f64) {
@@ -491,41 +464,16 @@ fn spring_pass(
     sdv: &mut [DVec3],
     sdx: Option<&mut [DVec3]>,
 ) {
-    let m = sdv.len();
     match sdx {
-        None => {
-            let body = |(k, out): (usize, &mut DVec3)| {
-                let (n, phi, _) = spring_update(springs, x, v, law, k);
-                *out = phi * n;
-            };
-            if m < PAR_MIN {
-                sdv.iter_mut().enumerate().for_each(body);
-            } else {
-                sdv.par_iter_mut()
-                    .enumerate()
-                    .with_min_len(PAR_CHUNK)
-                    .for_each(body);
-            }
-        }
-        Some(sdx) => {
-            let body = |(k, (dv, dx)): (usize, (&mut DVec3, &mut DVec3))| {
-                let (n, phi, disp) = spring_update(springs, x, v, law, k);
-                *dv = phi * n;
-                *dx = disp * n;
-            };
-            if m < PAR_MIN {
-                sdv.iter_mut()
-                    .zip(sdx.iter_mut())
-                    .enumerate()
-                    .for_each(body);
-            } else {
-                sdv.par_iter_mut()
-                    .zip(sdx.par_iter_mut())
-                    .enumerate()
-                    .with_min_len(PAR_CHUNK)
-                    .for_each(body);
-            }
-        }
+        None => par::each(sdv, |k, out| {
+            let (n, phi, _) = spring_update(springs, x, v, law, k);
+            *out = phi * n;
+        }),
+        Some(sdx) => par::each2(sdv, sdx, |k, dv, dx| {
+            let (n, phi, disp) = spring_update(springs, x, v, law, k);
+            *dv = phi * n;
+            *dx = disp * n;
+        }),
     }
 }
 
@@ -546,7 +494,7 @@ fn particle_pass(
         ..
     } = packed;
     let (inv_mass, inc) = (&inv_mass[..], &*incidence);
-    let body = |(i, (xi, vi)): (usize, (&mut DVec3, &mut DVec3))| {
+    par::each2(x, v, |i, xi, vi| {
         if inv_mass[i] == 0.0 {
             return;
         }
@@ -569,33 +517,16 @@ fn particle_pass(
                 *xi += h * *vi;
             }
         }
-    };
-    if x.len() < PAR_MIN {
-        x.iter_mut().zip(v.iter_mut()).enumerate().for_each(body);
-    } else {
-        x.par_iter_mut()
-            .zip(v.par_iter_mut())
-            .enumerate()
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    });
 }
 
 /// Accelerations from per-spring relative accelerations (RK4's derivative).
 fn acceleration(packed: &Packed, sdv: &[DVec3], g: DVec3, out: &mut [DVec3]) {
-    let body = |(i, a): (usize, &mut DVec3)| {
+    par::each(out, |i, a| {
         *a = if packed.inv_mass[i] == 0.0 {
             DVec3::ZERO
         } else {
             packed.incidence.sum(sdv, i) + g
         };
-    };
-    if out.len() < PAR_MIN {
-        out.iter_mut().enumerate().for_each(body);
-    } else {
-        out.par_iter_mut()
-            .enumerate()
-            .with_min_len(PAR_CHUNK)
-            .for_each(body);
-    }
+    });
 }

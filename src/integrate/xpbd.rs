@@ -7,9 +7,9 @@
 //! `x_b += w_b Δλ n`; then `v = (x − x_prev)/h`.
 
 use glam::DVec3;
-use rayon::prelude::*;
 
-use super::{PAR_CHUNK, PAR_MIN};
+use super::gauss_seidel::{self, Disjoint};
+use super::par;
 use crate::buffers::Packed;
 
 /// Scratch: positions at the start of the substep.
@@ -25,6 +25,9 @@ impl Xpbd {
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
         self.prev.copy_from_slice(&packed.x);
+        // Predict: x̃ = x + h (v + h g).
+        gauss_seidel::add_gravity(packed, g, h);
+        gauss_seidel::drift(packed, h);
         let Packed {
             x,
             v,
@@ -33,32 +36,12 @@ impl Xpbd {
             colouring,
             ..
         } = packed;
-        let predict = |((xi, vi), &w): ((&mut DVec3, &mut DVec3), &f64)| {
-            if w != 0.0 {
-                *vi += h * g;
-                *xi += h * *vi;
-            }
-        };
-        if x.len() < PAR_MIN {
-            x.iter_mut()
-                .zip(v.iter_mut())
-                .zip(inv_mass.iter())
-                .for_each(predict);
-        } else {
-            x.par_iter_mut()
-                .zip(v.par_iter_mut())
-                .zip(inv_mass.par_iter())
-                .with_min_len(PAR_CHUNK)
-                .for_each(predict);
-        }
         let prev = &self.prev;
         let inv_mass = &inv_mass[..];
         let springs = &springs[..];
-        let xs = super::gauss_seidel::Disjoint::new(&mut x[..]);
+        let xs = Disjoint::new(&mut x[..]);
         for c in 0..colouring.colours() {
-            let members = &colouring.springs
-                [colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize];
-            let body = |&k: &u32| {
+            par::each_of(colouring.members(c), |&k| {
                 let s = &springs[k as usize];
                 if s.stiffness == 0.0 {
                     // No compliance to speak of: a pure damper has no XPBD form here.
@@ -77,26 +60,13 @@ impl Xpbd {
                 let dl = -((len - s.rest) + gamma * rel) / ((1.0 + gamma) * (wa + wb) + compliance);
                 *xa -= wa * dl * n;
                 *xb += wb * dl * n;
-            };
-            if members.len() < PAR_MIN {
-                members.iter().for_each(body);
-            } else {
-                members.par_iter().with_min_len(PAR_CHUNK).for_each(body);
-            }
+            });
         }
-        let update = |(i, (vi, xi)): (usize, (&mut DVec3, &DVec3))| {
+        let x = &x[..];
+        par::each(v, |i, vi| {
             if inv_mass[i] != 0.0 {
-                *vi = (*xi - prev[i]) / h;
+                *vi = (x[i] - prev[i]) / h;
             }
-        };
-        if v.len() < PAR_MIN {
-            v.iter_mut().zip(x.iter()).enumerate().for_each(update);
-        } else {
-            v.par_iter_mut()
-                .zip(x.par_iter())
-                .enumerate()
-                .with_min_len(PAR_CHUNK)
-                .for_each(update);
-        }
+        });
     }
 }
