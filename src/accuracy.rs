@@ -36,6 +36,7 @@ fn empty(gravity: [f64; 3]) -> Scene {
         dt: T,
         substeps: Some(1),
         gravity,
+        backend: None,
         integrator: None,
         exact_displacement: false,
         seconds: Some(T),

@@ -22,6 +22,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
         dt: 1e-4,
         substeps: Some(1),
         gravity: [0.0, -9.81, 0.0],
+        backend: None,
         integrator: None,
         exact_displacement: false,
         seconds: None,

@@ -53,6 +53,10 @@ fn format_issues(path: &std::path::Path, issues: &[Issue]) -> String {
 pub enum SimError {
     #[error("unknown integrator `{0}` (known: {known})", known = known_integrators())]
     UnknownIntegrator(String),
+    #[error("unknown backend `{0}` (known: cpu, gpu, auto)")]
+    UnknownBackend(String),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
     #[error("time step must be finite and > 0, got {0}")]
     BadStep(f64),
     #[error("substeps must be ≥ 1")]
@@ -71,6 +75,29 @@ pub enum SimError {
         time: f64,
         particle: usize,
     },
+}
+
+/// Why the GPU back end could not run.
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter (Vulkan or GL) found; install a driver, or Mesa's lavapipe for a software one (apt-get install mesa-vulkan-drivers libvulkan1)"
+    )]
+    NoAdapter,
+    #[error("only software GPU adapters found ({found}); `--backend auto` does not use them, `--backend gpu` does")]
+    OnlySoftware { found: String },
+    #[error("GPU adapter {adapter}: {what}")]
+    Device { adapter: String, what: String },
+    #[error("reading the GPU state back failed: {0}")]
+    Readback(String),
+    #[error("integrator {integrator} has no GPU kernel (GPU kernels: {supported}){extra}")]
+    NoKernel {
+        integrator: crate::Integrator,
+        supported: String,
+        extra: &'static str,
+    },
+    #[error("this build has no GPU back end (built without the `gpu` feature)")]
+    NotBuilt,
 }
 
 /// Any error of the crate's API.

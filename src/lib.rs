@@ -31,10 +31,13 @@
 //! ```
 
 pub mod accuracy;
+pub mod backend;
 pub mod bench;
 pub mod buffers;
 pub mod components;
 pub mod error;
+#[cfg(feature = "gpu")]
+pub mod gpu;
 pub mod integrate;
 pub mod metrics;
 #[cfg(feature = "rapier")]
@@ -46,8 +49,9 @@ pub mod stability;
 pub mod statics;
 pub mod step_control;
 
+pub use backend::Backend;
 pub use components::{Particle, Pin, SceneIndex, Spring};
-pub use error::{Error, SceneError, SimError};
+pub use error::{Error, GpuError, SceneError, SimError};
 pub use integrate::Integrator;
 pub use scene::Scene;
 pub use schedule::{Stage, StepStats};
@@ -55,7 +59,7 @@ pub use simulation::{Diagnostics, SimConfig, Simulation};
 
 pub mod prelude {
     pub use crate::{
-        Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring, StepStats,
+        Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring, StepStats,
     };
     pub use glam::DVec3;
 }

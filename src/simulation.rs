@@ -6,6 +6,7 @@ use std::time::Instant;
 use glam::DVec3;
 use hecs::World;
 
+use crate::backend::Backend;
 use crate::buffers::Packed;
 use crate::error::{Error, SimError};
 use crate::integrate::{Integrator, Solver};
@@ -29,6 +30,8 @@ pub struct SimConfig {
     pub integrator: Integrator,
     /// Harmonic only: move positions by each spring's closed-form displacement too.
     pub exact_displacement: bool,
+    /// Where the integrate stage runs.
+    pub backend: Backend,
 }
 
 impl Default for SimConfig {
@@ -40,6 +43,7 @@ impl Default for SimConfig {
             gravity: DVec3::new(0.0, -9.81, 0.0),
             integrator: Integrator::default(),
             exact_displacement: false,
+            backend: Backend::Cpu,
         }
     }
 }
@@ -84,6 +88,44 @@ pub struct Simulation {
     steps: u64,
     time: f64,
     stats: StepStats,
+    /// The GPU step, when the backend resolved to the GPU.
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::gpu::GpuSolver>,
+}
+
+/// The GPU solver a config asks for: `None` runs on the CPU.
+#[cfg(feature = "gpu")]
+fn gpu_solver(config: &SimConfig) -> Result<Option<crate::gpu::GpuSolver>, SimError> {
+    use crate::gpu::{GpuContext, GpuSolver, Kernel};
+    let kernel = Kernel::of(config.integrator, config.exact_displacement);
+    match (config.backend, kernel) {
+        (Backend::Cpu, _) | (Backend::Auto, None) => Ok(None),
+        (Backend::Gpu, None) => Err(no_kernel(config)),
+        (Backend::Gpu, Some(k)) => Ok(Some(GpuSolver::new(GpuContext::shared(true)?, k)?)),
+        (Backend::Auto, Some(k)) => Ok(GpuContext::shared(false)
+            .ok()
+            .map(|ctx| GpuSolver::new(ctx, k))
+            .transpose()?),
+    }
+}
+
+#[cfg(feature = "gpu")]
+fn no_kernel(config: &SimConfig) -> SimError {
+    let supported = crate::gpu::Kernel::supported()
+        .map(|i| i.name())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let extra = if config.integrator == Integrator::Harmonic {
+        " (harmonic runs on the GPU without exact_displacement)"
+    } else {
+        ""
+    };
+    crate::error::GpuError::NoKernel {
+        integrator: config.integrator,
+        supported,
+        extra,
+    }
+    .into()
 }
 
 impl Simulation {
@@ -101,7 +143,13 @@ impl Simulation {
             steps: 0,
             time: 0.0,
             stats: StepStats::default(),
+            #[cfg(feature = "gpu")]
+            gpu: gpu_solver(&config)?,
         };
+        #[cfg(not(feature = "gpu"))]
+        if config.backend == Backend::Gpu {
+            return Err(crate::error::GpuError::NotBuilt.into());
+        }
         sim.gather()?;
         Ok(sim)
     }
@@ -131,6 +179,13 @@ impl Simulation {
         }
         let t1 = Instant::now();
         let h = self.config.h();
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            // Every substep in one submit; the state comes back once, for the scatter.
+            gpu.run(self.config.substeps)?;
+            gpu.read_back(&mut self.packed)?;
+            return self.finish_frame(t0, t1, gathered);
+        }
         let (solver, packed, substeps) = (&mut self.solver, &mut self.packed, self.config.substeps);
         let mut integrate = move || (0..substeps).try_for_each(|_| solver.substep(packed, h));
         if self.parallel {
@@ -140,6 +195,16 @@ impl Simulation {
         } else {
             integrate()?;
         }
+        self.finish_frame(t0, t1, gathered)
+    }
+
+    /// The end of a frame: the finiteness check, then the scatter.
+    fn finish_frame(
+        &mut self,
+        t0: Instant,
+        t1: Instant,
+        gathered: bool,
+    ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.steps += 1;
         self.time += self.config.dt;
@@ -168,6 +233,12 @@ impl Simulation {
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            let c = &self.config;
+            let lin = self.solver.coefficients();
+            gpu.upload(&self.packed, lin, c.gravity, c.h(), c.integrator)?;
+        }
         self.dirty = false;
         Ok(())
     }
@@ -192,12 +263,52 @@ impl Simulation {
         let keep_solver = config.integrator == self.config.integrator
             && config.exact_displacement == self.config.exact_displacement
             && config.gravity == self.config.gravity;
+        let same_backend = keep_solver && config.backend == self.config.backend;
+        #[cfg(feature = "gpu")]
+        if !same_backend {
+            self.gpu = gpu_solver(&config)?;
+            self.dirty = true;
+        }
+        #[cfg(not(feature = "gpu"))]
+        if config.backend == Backend::Gpu {
+            return Err(crate::error::GpuError::NotBuilt.into());
+        }
+        let _ = same_backend;
         self.config = config;
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
         }
         self.choose_substeps();
-        self.solver.prepare(&self.packed, self.config.h())
+        self.solver.prepare(&self.packed, self.config.h())?;
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            gpu.set_step(&self.packed, self.solver.coefficients(), self.config.h())?;
+        }
+        Ok(())
+    }
+
+    /// The back end the integrate stage runs on: `Cpu` or `Gpu` (never `Auto`).
+    pub fn backend(&self) -> Backend {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            return Backend::Gpu;
+        }
+        Backend::Cpu
+    }
+
+    /// The GPU adapter in use, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan, Cpu)".
+    pub fn gpu_adapter(&self) -> Option<String> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return Some(gpu.context().describe());
+        }
+        None
+    }
+
+    /// The GPU solver, when the step runs on the GPU (for tools and tests).
+    #[cfg(feature = "gpu")]
+    pub fn gpu_solver(&mut self) -> Option<&mut crate::gpu::GpuSolver> {
+        self.gpu.as_mut()
     }
 
     fn choose_substeps(&mut self) {

@@ -59,6 +59,7 @@ fn base(dt: f64, gravity: [f64; 3]) -> Scene {
         dt,
         substeps: Some(1),
         gravity,
+        backend: None,
         integrator: None,
         exact_displacement: false,
         seconds: None,

@@ -94,6 +94,10 @@ struct RunArgs {
     /// Harmonic: move positions by each spring's exact displacement too.
     #[arg(long)]
     exact_displacement: bool,
+    /// Where the step runs: cpu, gpu (any adapter, software included) or auto (a hardware GPU
+    /// if present, else the CPU). Default: the scene's, else cpu.
+    #[arg(long)]
+    backend: Option<String>,
     /// Write `step,time,particle,x,y,z,vx,vy,vz` rows (scene order) to this CSV file.
     #[arg(long)]
     trajectory: Option<PathBuf>,
@@ -232,8 +236,8 @@ fn check(paths: &[PathBuf]) -> Result<(), String> {
 
 fn run(args: RunArgs) -> Result<(), String> {
     let scene = Scene::load(&args.scene).map_err(|e| e.to_string())?;
-    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
-    let mut config = *sim.config();
+    let built = scene.build();
+    let mut config = built.config;
     if let Some(dt) = args.dt {
         config.dt = dt;
     }
@@ -244,8 +248,12 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(name) = &args.integrator {
         config.integrator = name.parse().map_err(|e: SimError| e.to_string())?;
     }
+    if let Some(name) = &args.backend {
+        config.backend = name.parse().map_err(|e: SimError| e.to_string())?;
+    }
     config.exact_displacement |= args.exact_displacement;
-    sim.set_config(config).map_err(|e| e.to_string())?;
+    let sim = Simulation::new(built.world, config).map_err(|e| e.to_string())?;
+    let mut sim = sim;
     let config = *sim.config();
     if args.every == 0 {
         return Err("--every must be ≥ 1".into());
@@ -303,6 +311,10 @@ fn run(args: RunArgs) -> Result<(), String> {
                 ""
             }
         );
+    }
+    match sim.gpu_adapter() {
+        Some(adapter) => println!("backend: gpu, adapter {adapter}"),
+        None => println!("backend: cpu ({} thread(s))", rayon::current_num_threads()),
     }
     match ratio {
         Some((r, k)) => println!("h/h_c of the stiffest spring: {r:.4} (spring {k}, h_c = π/ω0)"),

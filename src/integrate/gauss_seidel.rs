@@ -60,13 +60,8 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
             let (a, b) = (s.a as usize, s.b as usize);
             // SAFETY: springs of one colour have pairwise distinct ends, and a != b.
             let (va, vb) = unsafe { (v.get(a), v.get(b)) };
-            let d = x[b] - x[a];
-            let len = d.length();
-            let n = d / len;
-            let delta = len - s.rest;
-            let delta_dot = n.dot(*vb - *va);
             let l = &lin[k];
-            let mut phi = l.p * delta + l.q * delta_dot;
+            let (n, mut phi) = super::spring_response(s, x, *va, *vb, l);
             if let Some(f) = forcing {
                 phi += l.s * f[k];
             }

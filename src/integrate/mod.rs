@@ -169,6 +169,12 @@ impl Solver {
         }
     }
 
+    /// Per-spring step coefficients for the prepared `h` (Jacobi and Gauss–Seidel integrators;
+    /// empty for the others). The GPU back end uploads these.
+    pub fn coefficients(&self) -> &[Linear] {
+        &self.lin
+    }
+
     /// Forgets the coefficients, so the next [`Self::prepare`] recomputes them (after a gather).
     pub fn invalidate(&mut self) {
         self.h = f64::NAN;
@@ -422,7 +428,32 @@ impl Solver {
     }
 }
 
-/// One spring's change of relative velocity `φ n` (and displacement `D n`) from the state.
+/// Geometry of one spring: unit axis `n`, stretch `δ` and stretch rate `δ̇`.
+#[inline(always)]
+fn stretch(s: &PackedSpring, x: &[DVec3], va: DVec3, vb: DVec3) -> (DVec3, f64, f64) {
+    let d = x[s.b as usize] - x[s.a as usize];
+    let len = d.length();
+    let n = d / len;
+    let delta = len - s.rest;
+    let delta_dot = n.dot(vb - va);
+    (n, delta, delta_dot)
+}
+
+/// The unit axis `n` and `φ = p δ + q δ̇` of one spring: the hot line of every Jacobi and
+/// Gauss–Seidel step. `spring_response` in shaders/integrate.wgsl mirrors it.
+#[inline(always)]
+pub(crate) fn spring_response(
+    s: &PackedSpring,
+    x: &[DVec3],
+    va: DVec3,
+    vb: DVec3,
+    l: &Linear,
+) -> (DVec3, f64) {
+    let (n, delta, delta_dot) = stretch(s, x, va, vb);
+    (n, l.p * delta + l.q * delta_dot)
+}
+
+/// One spring's change of relative velocity: the axis `n` and `φ`.
 #[inline(always)]
 fn spring_update(
     springs: &[PackedSpring],
@@ -430,32 +461,25 @@ fn spring_update(
     v: &[DVec3],
     law: Law<'_>,
     k: usize,
-) -> (DVec3, f64, f64) {
+) -> (DVec3, f64) {
     let s = &springs[k];
-    let (a, b) = (s.a as usize, s.b as usize);
-    let d = x[b] - x[a];
-    let len = d.length();
-    let n = d / len;
-    let delta = len - s.rest;
-    let delta_dot = n.dot(v[b] - v[a]);
+    let (va, vb) = (v[s.a as usize], v[s.b as usize]);
     match law {
-        Law::Linear(lin) => {
-            let l = &lin[k];
-            (
-                n,
-                l.p * delta + l.q * delta_dot,
-                l.r * delta + l.s * delta_dot,
-            )
-        }
+        Law::Linear(lin) => spring_response(s, x, va, vb, &lin[k]),
         Law::Forced(lin, force) => {
             let l = &lin[k];
-            (n, l.p * delta + l.q * delta_dot + l.s * force[k], 0.0)
+            let (n, phi) = spring_response(s, x, va, vb, l);
+            (n, phi + l.s * force[k])
         }
-        Law::Paper(paper, h) => (n, paper[k].phi(delta, delta_dot, h), 0.0),
+        Law::Paper(paper, h) => {
+            let (n, delta, delta_dot) = stretch(s, x, va, vb);
+            (n, paper[k].phi(delta, delta_dot, h))
+        }
     }
 }
 
-/// Pass 1: each spring writes its velocity change `φ n` (and `D n` when `sdx` is given).
+/// Pass 1: each spring writes its velocity change `φ n` (and, for the exact-displacement
+/// update, its displacement `D n = (r δ + s δ̇) n` into `sdx`).
 fn spring_pass(
     springs: &[PackedSpring],
     x: &[DVec3],
@@ -464,15 +488,16 @@ fn spring_pass(
     sdv: &mut [DVec3],
     sdx: Option<&mut [DVec3]>,
 ) {
-    match sdx {
-        None => par::each(sdv, |k, out| {
-            let (n, phi, _) = spring_update(springs, x, v, law, k);
-            *out = phi * n;
+    match (sdx, law) {
+        (Some(sdx), Law::Linear(lin)) => par::each2(sdv, sdx, |k, dv, dx| {
+            let (s, l) = (&springs[k], &lin[k]);
+            let (n, delta, delta_dot) = stretch(s, x, v[s.a as usize], v[s.b as usize]);
+            *dv = (l.p * delta + l.q * delta_dot) * n;
+            *dx = (l.r * delta + l.s * delta_dot) * n;
         }),
-        Some(sdx) => par::each2(sdv, sdx, |k, dv, dx| {
-            let (n, phi, disp) = spring_update(springs, x, v, law, k);
-            *dv = phi * n;
-            *dx = disp * n;
+        _ => par::each(sdv, |k, out| {
+            let (n, phi) = spring_update(springs, x, v, law, k);
+            *out = phi * n;
         }),
     }
 }

@@ -210,6 +210,11 @@ impl Scene {
                 gravity: self.gravity.into(),
                 integrator,
                 exact_displacement: self.exact_displacement,
+                backend: self
+                    .backend
+                    .as_deref()
+                    .and_then(|n| n.parse().ok())
+                    .unwrap_or_default(),
             },
         }
     }

@@ -50,9 +50,12 @@ pub struct Scene {
     pub substeps: Option<u32>,
     #[serde(default = "default_gravity")]
     pub gravity: V3,
-    /// Integrator name; the engine's default (`harmonic`) when absent.
+    /// Integrator name; the engine's default (`symplectic-euler`) when absent.
     #[serde(default)]
     pub integrator: Option<String>,
+    /// Back end: `"cpu"` (the default), `"gpu"` or `"auto"`; the CLI's `--backend` overrides it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backend: Option<String>,
     /// Harmonic only: move positions by each spring's exact displacement too.
     #[serde(default)]
     pub exact_displacement: bool,

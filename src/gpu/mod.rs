@@ -1,0 +1,807 @@
+//! The GPU back end: `shaders/integrate.wgsl` through wgpu, state resident on the device.
+//!
+//! - [`GpuContext`]: adapter (Vulkan or GL), device and queue.
+//! - [`GpuSolver`]: pipelines (one per entry point, specialised to the scene), buffers uploaded
+//!   at gather, substeps encoded into one submit, and a staging buffer read only on request.
+//!
+//! The springs go to the device in colour order, so a Gauss–Seidel colour is a contiguous range
+//! and the Jacobi passes index the same array. Coefficients (`p`, `q`) come from the CPU
+//! ([`crate::integrate::harmonic`]), once per `h`: one definition of the spring math.
+
+use std::sync::{Arc, Mutex, OnceLock};
+
+use bytemuck::{Pod, Zeroable};
+use glam::DVec3;
+use wgpu::util::DeviceExt;
+
+use crate::buffers::Packed;
+use crate::error::GpuError;
+use crate::integrate::harmonic::Linear;
+use crate::integrate::{Integrator, SGS_SWEEPS};
+
+/// The WGSL source of every kernel.
+pub const SHADER: &str = include_str!("../../shaders/integrate.wgsl");
+/// Invocations per workgroup (the shader's `WORKGROUP` override).
+pub const WORKGROUP: u32 = 256;
+/// Workgroups per dispatch dimension (WebGPU's minimum limit).
+const MAX_GROUPS: u32 = 65_535;
+
+/// `Params` in shaders/integrate.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Params {
+    pub gravity: [f32; 3],
+    pub h: f32,
+    pub particles: u32,
+    pub springs: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// `Position`: `x = hi + lo`, a compensated pair.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Position {
+    pub hi: [f32; 4],
+    pub lo: [f32; 4],
+}
+
+impl Position {
+    pub fn from_f64(x: DVec3) -> Self {
+        let hi = x.as_vec3();
+        let lo = (x - hi.as_dvec3()).as_vec3();
+        Self {
+            hi: [hi.x, hi.y, hi.z, 0.0],
+            lo: [lo.x, lo.y, lo.z, 0.0],
+        }
+    }
+    pub fn to_f64(self) -> DVec3 {
+        let [hx, hy, hz, _] = self.hi.map(f64::from);
+        let [lx, ly, lz, _] = self.lo.map(f64::from);
+        DVec3::new(hx + lx, hy + ly, hz + lz)
+    }
+}
+
+/// `Spring`: ends, rest length, step coefficients and mass shares.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Spring {
+    pub a: u32,
+    pub b: u32,
+    pub rest: f32,
+    pub p: f32,
+    pub q: f32,
+    pub wa: f32,
+    pub wb: f32,
+    pub _pad: f32,
+}
+
+/// `Entry`: one incident spring of a particle.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Entry {
+    pub spring: u32,
+    pub coef: f32,
+}
+
+/// `Range`: one colour's springs.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Range {
+    pub start: u32,
+    pub count: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// How the kernels step: which entry points run, in which order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// `spring_pass` then `particle_pass` (harmonic, symplectic and explicit Euler).
+    Jacobi,
+    /// `add_gravity`, `sweeps` colour sweeps alternating direction, `drift`.
+    GaussSeidel { sweeps: u32 },
+}
+
+impl Kernel {
+    /// The GPU kernel of an integrator, if it has one.
+    pub fn of(integrator: Integrator, exact_displacement: bool) -> Option<Kernel> {
+        match integrator {
+            Integrator::Harmonic if exact_displacement => None,
+            Integrator::Harmonic | Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
+                Some(Kernel::Jacobi)
+            }
+            Integrator::HarmonicGs => Some(Kernel::GaussSeidel { sweeps: 1 }),
+            Integrator::HarmonicSgs => Some(Kernel::GaussSeidel {
+                sweeps: SGS_SWEEPS as u32,
+            }),
+            _ => None,
+        }
+    }
+
+    /// Integrators with a GPU kernel.
+    pub fn supported() -> impl Iterator<Item = Integrator> {
+        Integrator::ALL
+            .into_iter()
+            .filter(|&i| Kernel::of(i, false).is_some())
+    }
+}
+
+/// What the shader is specialised to (its override constants), chosen from the scene at gather.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Specialisation {
+    /// Some spring has `q ≠ 0` (damped, or any harmonic spring): the spring pass reads velocities.
+    pub rate: bool,
+    /// Some particle is pinned: the pin test stays in.
+    pub pins: bool,
+    /// 0: velocity first; 1: position first (explicit Euler).
+    pub update: u32,
+}
+
+impl Specialisation {
+    /// What a scene needs.
+    pub fn of(packed: &Packed, lin: &[Linear], integrator: Integrator) -> Self {
+        let live = |k: &&u32| packed.springs[**k as usize].mu.is_finite();
+        Self {
+            rate: packed
+                .colouring
+                .springs
+                .iter()
+                .filter(live)
+                .any(|&k| lin[k as usize].q != 0.0),
+            pins: packed.inv_mass.contains(&0.0),
+            update: u32::from(integrator == Integrator::ExplicitEuler),
+        }
+    }
+
+    /// Every term in, whatever the scene: the unspecialised kernel, for comparison.
+    pub fn general(self) -> Self {
+        Self {
+            rate: true,
+            pins: true,
+            ..self
+        }
+    }
+
+    fn constants(&self) -> [(&'static str, f64); 4] {
+        [
+            ("WORKGROUP", WORKGROUP as f64),
+            ("RATE", f64::from(u8::from(self.rate))),
+            ("PINS", f64::from(u8::from(self.pins))),
+            ("UPDATE", self.update as f64),
+        ]
+    }
+}
+
+/// True for adapters that run on the CPU (lavapipe, llvmpipe, SwiftShader).
+pub fn is_software(info: &wgpu::AdapterInfo) -> bool {
+    let name = info.name.to_lowercase();
+    info.device_type == wgpu::DeviceType::Cpu
+        || ["llvmpipe", "lavapipe", "softpipe", "swiftshader"]
+            .iter()
+            .any(|s| name.contains(s))
+}
+
+/// An adapter, its device and queue.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    pub limits: wgpu::Limits,
+    /// Errors wgpu reported outside an error scope (instead of its default panic).
+    uncaptured: Arc<Mutex<Vec<String>>>,
+}
+
+impl GpuContext {
+    /// The best adapter: discrete, integrated, virtual, then software (only when
+    /// `allow_software`); Vulkan, else GL.
+    pub fn new(allow_software: bool) -> Result<Self, GpuError> {
+        // Vulkan first; GL (which probes EGL and window systems) only when Vulkan has nothing.
+        let mut adapters = Vec::new();
+        for backends in [wgpu::Backends::VULKAN, wgpu::Backends::GL] {
+            let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+                backends,
+                ..wgpu::InstanceDescriptor::new_without_display_handle()
+            });
+            adapters.extend(pollster::block_on(instance.enumerate_adapters(backends)));
+            if adapters
+                .iter()
+                .any(|a| allow_software || !is_software(&a.get_info()))
+            {
+                break;
+            }
+        }
+        let rank = |info: &wgpu::AdapterInfo| {
+            let kind = match info.device_type {
+                _ if is_software(info) => 4,
+                wgpu::DeviceType::DiscreteGpu => 0,
+                wgpu::DeviceType::IntegratedGpu => 1,
+                wgpu::DeviceType::VirtualGpu => 2,
+                _ => 3,
+            };
+            (kind, u8::from(info.backend != wgpu::Backend::Vulkan))
+        };
+        let found: Vec<String> = adapters.iter().map(|a| describe(&a.get_info())).collect();
+        let adapter = adapters
+            .into_iter()
+            .filter(|a| allow_software || !is_software(&a.get_info()))
+            .min_by_key(|a| rank(&a.get_info()));
+        let Some(adapter) = adapter else {
+            return Err(if found.is_empty() {
+                GpuError::NoAdapter
+            } else {
+                GpuError::OnlySoftware {
+                    found: found.join("; "),
+                }
+            });
+        };
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        if limits.max_storage_buffers_per_shader_stage < 6 {
+            return Err(GpuError::Device {
+                adapter: describe(&info),
+                what: format!(
+                    "needs 6 storage buffers per shader stage, the adapter has {}",
+                    limits.max_storage_buffers_per_shader_stage
+                ),
+            });
+        }
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("harmonic"),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device {
+            adapter: describe(&info),
+            what: e.to_string(),
+        })?;
+        let uncaptured = Arc::new(Mutex::new(Vec::new()));
+        let sink = uncaptured.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut v) = sink.lock() {
+                v.push(e.to_string());
+            }
+        }));
+        Ok(Self {
+            device,
+            queue,
+            info,
+            limits,
+            uncaptured,
+        })
+    }
+
+    /// One context per process and kind (hardware only, or software allowed), made on first use:
+    /// every simulation shares its device.
+    pub fn shared(allow_software: bool) -> Result<Arc<GpuContext>, GpuError> {
+        static HARDWARE: OnceLock<Result<Arc<GpuContext>, GpuError>> = OnceLock::new();
+        static ANY: OnceLock<Result<Arc<GpuContext>, GpuError>> = OnceLock::new();
+        let cell = if allow_software { &ANY } else { &HARDWARE };
+        cell.get_or_init(|| GpuContext::new(allow_software).map(Arc::new))
+            .clone()
+    }
+
+    /// "name (backend, device type)".
+    pub fn describe(&self) -> String {
+        describe(&self.info)
+    }
+
+    pub fn is_software(&self) -> bool {
+        is_software(&self.info)
+    }
+
+    /// Runs `f` inside a validation and an out-of-memory error scope.
+    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let out = f();
+        let e1 = pollster::block_on(validation.pop());
+        let e2 = pollster::block_on(oom.pop());
+        let stray = self
+            .uncaptured
+            .lock()
+            .map(|mut v| v.drain(..).collect::<Vec<_>>())
+            .unwrap_or_default();
+        match e1.or(e2).map(|e| e.to_string()).or(stray.into_iter().next()) {
+            Some(e) => Err(GpuError::Device {
+                adapter: self.describe(),
+                what: format!("{what}: {e}"),
+            }),
+            None => Ok(out),
+        }
+    }
+}
+
+fn describe(info: &wgpu::AdapterInfo) -> String {
+    format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
+}
+
+/// The compute pipelines of one specialisation.
+struct Pipelines {
+    spec: Specialisation,
+    spring_pass: wgpu::ComputePipeline,
+    particle_pass: wgpu::ComputePipeline,
+    add_gravity: wgpu::ComputePipeline,
+    sweep_colour: wgpu::ComputePipeline,
+    drift: wgpu::ComputePipeline,
+}
+
+/// Device buffers of one topology.
+struct Buffers {
+    params: wgpu::Buffer,
+    pos: wgpu::Buffer,
+    vel: wgpu::Buffer,
+    springs: wgpu::Buffer,
+    sdv: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    /// Colour ranges (start, count), in sweep order.
+    colours: Vec<(u32, u32)>,
+    /// Dynamic-offset stride of the colour uniform.
+    colour_stride: u32,
+    particles: u32,
+    springs_len: u32,
+}
+
+/// The GPU step over one scene.
+pub struct GpuSolver {
+    ctx: Arc<GpuContext>,
+    module: wgpu::ShaderModule,
+    layout: wgpu::BindGroupLayout,
+    pipeline_layout: wgpu::PipelineLayout,
+    pipelines: Option<Pipelines>,
+    buffers: Option<Buffers>,
+    kernel: Kernel,
+    /// Whether to specialise the shader to the scene (off only to measure what it buys).
+    pub specialise: bool,
+    /// The host copy of the springs, in device order, for coefficient updates.
+    host_springs: Vec<Spring>,
+    h: f32,
+}
+
+impl GpuSolver {
+    pub fn new(ctx: Arc<GpuContext>, kernel: Kernel) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let (module, layout, pipeline_layout) = ctx.scoped("shader module", || {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("integrate.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+            });
+            let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+            let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: dynamic,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("integrate"),
+                entries: &[
+                    uniform(0, false),
+                    storage(1, false),
+                    storage(2, false),
+                    storage(3, true),
+                    storage(4, false),
+                    storage(5, true),
+                    storage(6, true),
+                    uniform(7, true),
+                ],
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("integrate"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            (module, layout, pipeline_layout)
+        })?;
+        Ok(Self {
+            ctx,
+            module,
+            layout,
+            pipeline_layout,
+            pipelines: None,
+            buffers: None,
+            kernel,
+            specialise: true,
+            host_springs: Vec::new(),
+            h: f32::NAN,
+        })
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
+
+    /// The specialisation the pipelines were built for (after an upload).
+    pub fn specialisation(&self) -> Option<Specialisation> {
+        self.pipelines.as_ref().map(|p| p.spec)
+    }
+
+    fn pipelines(&self, spec: Specialisation) -> Result<Pipelines, GpuError> {
+        let constants = spec.constants();
+        let make = |entry: &str| {
+            self.ctx
+                .device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(entry),
+                    layout: Some(&self.pipeline_layout),
+                    module: &self.module,
+                    entry_point: Some(entry),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &constants,
+                        zero_initialize_workgroup_memory: false,
+                    },
+                    cache: None,
+                })
+        };
+        self.ctx.scoped("compute pipelines", || Pipelines {
+            spec,
+            spring_pass: make("spring_pass"),
+            particle_pass: make("particle_pass"),
+            add_gravity: make("add_gravity"),
+            sweep_colour: make("sweep_colour"),
+            drift: make("drift"),
+        })
+    }
+
+    /// Gather: uploads state and topology, with coefficients `lin` (per packed spring) for step
+    /// `h`, and builds the pipelines if the scene needs another specialisation.
+    pub fn upload(
+        &mut self,
+        packed: &Packed,
+        lin: &[Linear],
+        gravity: DVec3,
+        h: f64,
+        integrator: Integrator,
+    ) -> Result<(), GpuError> {
+        let mut spec = Specialisation::of(packed, lin, integrator);
+        if !self.specialise {
+            spec = spec.general();
+        }
+        if self.pipelines.as_ref().map(|p| p.spec) != Some(spec) {
+            self.pipelines = Some(self.pipelines(spec)?);
+        }
+        let n = packed.particle_count();
+        let order = &packed.colouring.springs;
+        // Device index of each packed spring (u32::MAX: both ends pinned, not on the device).
+        let mut device_index = vec![u32::MAX; packed.springs.len()];
+        for (j, &k) in order.iter().enumerate() {
+            device_index[k as usize] = j as u32;
+        }
+        self.host_springs = order
+            .iter()
+            .map(|&k| {
+                let (s, l) = (&packed.springs[k as usize], &lin[k as usize]);
+                Spring {
+                    a: s.a,
+                    b: s.b,
+                    rest: s.rest as f32,
+                    p: l.p as f32,
+                    q: l.q as f32,
+                    wa: s.wa as f32,
+                    wb: s.wb as f32,
+                    _pad: 0.0,
+                }
+            })
+            .collect();
+        let positions: Vec<Position> = packed.x.iter().map(|&x| Position::from_f64(x)).collect();
+        let velocities = velocities(packed);
+        let inc = &packed.incidence;
+        let offsets = inc.offsets.clone();
+        let entries: Vec<Entry> = inc
+            .spring
+            .iter()
+            .zip(&inc.coef)
+            .map(|(&k, &c)| Entry {
+                spring: device_index[k as usize],
+                coef: c as f32,
+            })
+            .collect();
+        let stride = self.ctx.limits.min_uniform_buffer_offset_alignment.max(16);
+        let mut colours: Vec<(u32, u32)> = (0..packed.colouring.colours())
+            .map(|c| {
+                let o = &packed.colouring.offsets;
+                (o[c], o[c + 1] - o[c])
+            })
+            .collect();
+        if colours.is_empty() {
+            colours.push((0, 0));
+        }
+        let mut colour_bytes = vec![0u8; colours.len() * stride as usize];
+        for (c, &(start, count)) in colours.iter().enumerate() {
+            let r = Range {
+                start,
+                count,
+                ..Range::default()
+            };
+            let at = c * stride as usize;
+            colour_bytes[at..at + 16].copy_from_slice(bytemuck::bytes_of(&r));
+        }
+        let params = Params {
+            gravity: gravity.as_vec3().to_array(),
+            h: h as f32,
+            particles: n as u32,
+            springs: order.len() as u32,
+            ..Params::default()
+        };
+        let device = &self.ctx.device;
+        let host_springs = &self.host_springs;
+        let layout = &self.layout;
+        let buffers = self.ctx.scoped("upload", || {
+            use wgpu::BufferUsages as U;
+            let init = |label, bytes: &[u8], usage| {
+                // A binding may not be empty: a scene without springs still gets one element.
+                let bytes = if bytes.is_empty() { &[0u8; 32][..] } else { bytes };
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: bytes,
+                    usage,
+                })
+            };
+            let rw = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+            let params = init("params", bytemuck::bytes_of(&params), U::UNIFORM | U::COPY_DST);
+            let pos = init("pos", bytemuck::cast_slice(&positions), rw);
+            let vel = init("vel", bytemuck::cast_slice(&velocities), rw);
+            let springs = init("springs", bytemuck::cast_slice(host_springs), U::STORAGE | U::COPY_DST);
+            let sdv = init("sdv", &poison(host_springs.len() * 16), rw);
+            let offsets = init("offsets", bytemuck::cast_slice(&offsets), U::STORAGE);
+            let entries = init("entries", bytemuck::cast_slice(&entries), U::STORAGE);
+            let colour = init("colours", &colour_bytes, U::UNIFORM);
+            let state_bytes = (n * (std::mem::size_of::<Position>() + 16)).max(32) as u64;
+            let staging = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("staging"),
+                size: state_bytes,
+                usage: U::MAP_READ | U::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("integrate"),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry { binding: 0, resource: entire(&params) },
+                    wgpu::BindGroupEntry { binding: 1, resource: entire(&pos) },
+                    wgpu::BindGroupEntry { binding: 2, resource: entire(&vel) },
+                    wgpu::BindGroupEntry { binding: 3, resource: entire(&springs) },
+                    wgpu::BindGroupEntry { binding: 4, resource: entire(&sdv) },
+                    wgpu::BindGroupEntry { binding: 5, resource: entire(&offsets) },
+                    wgpu::BindGroupEntry { binding: 6, resource: entire(&entries) },
+                    wgpu::BindGroupEntry {
+                        binding: 7,
+                        resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: &colour,
+                            offset: 0,
+                            size: wgpu::BufferSize::new(16),
+                        }),
+                    },
+                ],
+            });
+            Buffers {
+                params,
+                pos,
+                vel,
+                springs,
+                sdv,
+                staging,
+                bind_group,
+                colours,
+                colour_stride: stride,
+                particles: n as u32,
+                springs_len: order.len() as u32,
+            }
+        })?;
+        self.buffers = Some(buffers);
+        self.h = h as f32;
+        Ok(())
+    }
+
+    /// A new step `h` with its coefficients: rewrites `h` and the springs' `p`, `q` only.
+    pub fn set_step(&mut self, packed: &Packed, lin: &[Linear], h: f64) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        if self.h == h as f32 {
+            return Ok(());
+        }
+        for (s, &k) in self.host_springs.iter_mut().zip(&packed.colouring.springs) {
+            s.p = lin[k as usize].p as f32;
+            s.q = lin[k as usize].q as f32;
+        }
+        let q = &self.ctx.queue;
+        q.write_buffer(&b.springs, 0, bytemuck::cast_slice(&self.host_springs));
+        // h is the 4th f32 of Params.
+        q.write_buffer(&b.params, 12, bytemuck::bytes_of(&(h as f32)));
+        self.h = h as f32;
+        Ok(())
+    }
+
+    /// Encodes `substeps` substeps into one submit. Nothing is read back.
+    pub fn run(&mut self, substeps: u32) -> Result<(), GpuError> {
+        let (Some(b), Some(p)) = (&self.buffers, &self.pipelines) else {
+            return Ok(());
+        };
+        let kernel = self.kernel;
+        let ctx = &self.ctx;
+        ctx.scoped("step", || {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("substeps"),
+                    timestamp_writes: None,
+                });
+                pass.set_bind_group(0, &b.bind_group, &[0]);
+                for _ in 0..substeps {
+                    match kernel {
+                        Kernel::Jacobi => {
+                            pass.set_pipeline(&p.spring_pass);
+                            dispatch(&mut pass, b.springs_len);
+                            pass.set_pipeline(&p.particle_pass);
+                            dispatch(&mut pass, b.particles);
+                        }
+                        Kernel::GaussSeidel { sweeps } => {
+                            pass.set_pipeline(&p.add_gravity);
+                            dispatch(&mut pass, b.particles);
+                            pass.set_pipeline(&p.sweep_colour);
+                            for sweep in 0..sweeps {
+                                let n = b.colours.len();
+                                for i in 0..n {
+                                    let c = if sweep % 2 == 1 { n - 1 - i } else { i };
+                                    let offset = c as u32 * b.colour_stride;
+                                    pass.set_bind_group(0, &b.bind_group, &[offset]);
+                                    dispatch(&mut pass, b.colours[c].1);
+                                }
+                            }
+                            pass.set_bind_group(0, &b.bind_group, &[0]);
+                            pass.set_pipeline(&p.drift);
+                            dispatch(&mut pass, b.particles);
+                        }
+                    }
+                }
+            }
+            ctx.queue.submit([encoder.finish()]);
+        })
+    }
+
+    /// Waits for the queued work and copies positions and velocities into `packed`
+    /// (pinned particles included: the kernels never write them).
+    pub fn read_back(&mut self, packed: &mut Packed) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        let n = b.particles as usize;
+        let pos_bytes = (n * std::mem::size_of::<Position>()) as u64;
+        let vel_bytes = (n * 16) as u64;
+        if n == 0 {
+            return Ok(());
+        }
+        let ctx = &self.ctx;
+        ctx.scoped("read back", || {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read back") });
+            encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
+            encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
+            ctx.queue.submit([encoder.finish()]);
+        })?;
+        let (tx, rx) = std::sync::mpsc::channel();
+        b.staging
+            .slice(..)
+            .map_async(wgpu::MapMode::Read, move |r| {
+                let _ = tx.send(r);
+            });
+        ctx.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        match rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(GpuError::Readback(e.to_string())),
+            Err(e) => return Err(GpuError::Readback(e.to_string())),
+        }
+        {
+            let view = b
+                .staging
+                .get_mapped_range(..)
+                .map_err(|e| GpuError::Readback(e.to_string()))?;
+            let bytes: &[u8] = &view;
+            let pos: &[Position] = bytemuck::cast_slice(&bytes[..pos_bytes as usize]);
+            let vel: &[[f32; 4]] =
+                bytemuck::cast_slice(&bytes[pos_bytes as usize..(pos_bytes + vel_bytes) as usize]);
+            for (x, p) in packed.x.iter_mut().zip(pos) {
+                *x = p.to_f64();
+            }
+            for (v, w) in packed.v.iter_mut().zip(vel) {
+                *v = DVec3::new(w[0].into(), w[1].into(), w[2].into());
+            }
+        }
+        b.staging.unmap();
+        Ok(())
+    }
+
+    /// Overwrites the per-spring output buffer with NaN, so an element a pass fails to write
+    /// shows up as a non-finite state (the parity tests call this before each run).
+    pub fn poison(&mut self) {
+        if let Some(b) = &self.buffers {
+            let bytes = poison(b.springs_len as usize * 16);
+            self.ctx.queue.write_buffer(&b.sdv, 0, &bytes);
+        }
+    }
+
+    /// Bytes the kernels move per substep at best (each element read or written once),
+    /// for the memory-bound floor: see BENCHMARKS.md.
+    pub fn bytes_per_substep(&self) -> u64 {
+        let Some(b) = &self.buffers else { return 0 };
+        let (n, m) = (b.particles as u64, b.springs_len as u64);
+        let spec = self.specialisation();
+        let rate = spec.is_none_or(|s| s.rate);
+        let pos = std::mem::size_of::<Position>() as u64;
+        match self.kernel {
+            Kernel::Jacobi => {
+                // Spring pass: spring, two positions (and velocities), one sdv write.
+                // Particle pass: offsets, entries, sdv reads, position and velocity in and out.
+                let spring_pass = m * (32 + 16) + n * (pos + if rate { 16 } else { 0 });
+                let particle_pass = n * (4 + 2 * pos + 2 * 16) + 2 * m * (8 + 16);
+                spring_pass + particle_pass
+            }
+            Kernel::GaussSeidel { sweeps } => {
+                let sweep = m * 32 + n * (pos + 2 * 16);
+                n * 2 * 16 + sweeps as u64 * sweep + n * (2 * pos + 16)
+            }
+        }
+    }
+}
+
+/// Free particles get `w = 1`, pinned ones `w = 0` (the shader's pin mask).
+fn entire(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+    b.as_entire_binding()
+}
+
+fn velocities(packed: &Packed) -> Vec<[f32; 4]> {
+    packed
+        .v
+        .iter()
+        .zip(&packed.inv_mass)
+        .map(|(v, &im)| {
+            let v = v.as_vec3();
+            [v.x, v.y, v.z, if im == 0.0 { 0.0 } else { 1.0 }]
+        })
+        .collect()
+}
+
+/// `len` bytes of f32 NaN.
+fn poison(len: usize) -> Vec<u8> {
+    f32::NAN
+        .to_le_bytes()
+        .iter()
+        .copied()
+        .cycle()
+        .take(len)
+        .collect()
+}
+
+/// One invocation per element, over a 2-D grid of workgroups when one dimension is not enough.
+fn dispatch(pass: &mut wgpu::ComputePass<'_>, count: u32) {
+    if count == 0 {
+        return;
+    }
+    let groups = count.div_ceil(WORKGROUP);
+    let x = groups.min(MAX_GROUPS);
+    pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
+}
