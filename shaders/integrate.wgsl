@@ -20,7 +20,8 @@ struct Params {
     h: f32,
     particles: u32,
     springs: u32,
-    _pad0: u32,
+    // Exactly 1, unknown to the shader compiler: keeps it from folding the two-sum.
+    one: f32,
     _pad1: u32,
 }
 
@@ -53,6 +54,8 @@ struct Entry {
 struct Range {
     start: u32,
     count: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -84,7 +87,7 @@ fn drift_by(i: u32, dx: vec3<f32>) {
     let hi = pos[i].hi.xyz;
     let y = dx + pos[i].lo.xyz;
     let t = hi + y;
-    let yv = t - hi;
+    let yv = t * params.one - hi;
     let lo = (hi - (t - yv)) + (y - yv);
     pos[i] = Position(vec4<f32>(t, 0.0), vec4<f32>(lo, 0.0));
 }

@@ -34,7 +34,8 @@ pub struct Params {
     pub h: f32,
     pub particles: u32,
     pub springs: u32,
-    pub _pad0: u32,
+    /// Always 1.0 (see `drift_by` in the shader).
+    pub one: f32,
     pub _pad1: u32,
 }
 
@@ -539,6 +540,7 @@ impl GpuSolver {
             h: h as f32,
             particles: n as u32,
             springs: order.len() as u32,
+            one: 1.0,
             ..Params::default()
         };
         let device = &self.ctx.device;
