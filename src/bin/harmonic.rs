@@ -55,6 +55,19 @@ enum Command {
         repeats: u32,
         #[arg(long, default_value = "bench-out")]
         out: PathBuf,
+        /// `gpu`: instead, GPU substeps/s against cloth size beside the CPU kernel, against the
+        /// memory-bound floor, and what each shader specialisation buys (writes gpu.md).
+        #[arg(long, default_value = "cpu")]
+        backend: String,
+        /// Cloth sizes N (N×N) for `--backend gpu`.
+        #[arg(long, value_delimiter = ',', default_value = "64,128,256,512,1024")]
+        sizes: Vec<u32>,
+        /// Largest N the CPU kernel also runs for `--backend gpu`.
+        #[arg(long, default_value_t = 1024)]
+        cpu_max: u32,
+        /// Integrator for `--backend gpu`.
+        #[arg(long, default_value = "symplectic-euler")]
+        integrator: String,
     },
     /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
     Throughput {
@@ -133,7 +146,15 @@ fn main() -> ExitCode {
             quick,
             repeats,
             out,
-        } => bench_report(quick, repeats, &out),
+            backend,
+            sizes,
+            cpu_max,
+            integrator,
+        } => match backend.as_str() {
+            "cpu" => bench_report(quick, repeats, &out),
+            "gpu" => gpu_bench(&sizes, &integrator, repeats, cpu_max, &out),
+            other => Err(format!("--backend {other}: the bench runs `cpu` or `gpu`")),
+        },
         Command::Throughput {
             size,
             substeps,
@@ -150,6 +171,35 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+#[cfg(feature = "gpu")]
+fn gpu_bench(
+    sizes: &[u32],
+    integrator: &str,
+    repeats: u32,
+    cpu_max: u32,
+    out: &std::path::Path,
+) -> Result<(), String> {
+    let integrator: Integrator = integrator.parse().map_err(|e: SimError| e.to_string())?;
+    if sizes.is_empty() || sizes.contains(&0) {
+        return Err("--sizes: give one or more sizes ≥ 1".into());
+    }
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let md = harmonic::gpu::bench::report(sizes, integrator, repeats, cpu_max, |what| {
+        eprintln!("bench: {what}")
+    })
+    .map_err(|e| e.to_string())?;
+    let path = out.join("gpu.md");
+    std::fs::write(&path, &md).map_err(|e| format!("{}: {e}", path.display()))?;
+    print!("{md}");
+    println!("wrote {}", path.display());
+    Ok(())
+}
+
+#[cfg(not(feature = "gpu"))]
+fn gpu_bench(_: &[u32], _: &str, _: u32, _: u32, _: &std::path::Path) -> Result<(), String> {
+    Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
 fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), String> {

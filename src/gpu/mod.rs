@@ -19,6 +19,8 @@ use crate::error::GpuError;
 use crate::integrate::harmonic::Linear;
 use crate::integrate::{Integrator, SGS_SWEEPS};
 
+pub mod bench;
+
 /// The WGSL source of every kernel.
 pub const SHADER: &str = include_str!("../../shaders/integrate.wgsl");
 /// Invocations per workgroup (the shader's `WORKGROUP` override).
