@@ -59,7 +59,8 @@ pub use simulation::{Diagnostics, SimConfig, Simulation};
 
 pub mod prelude {
     pub use crate::{
-        Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring, StepStats,
+        Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring,
+        StepStats,
     };
     pub use glam::DVec3;
 }

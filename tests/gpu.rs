@@ -28,8 +28,12 @@ fn shader_files() -> Vec<PathBuf> {
 
 fn parse(path: &Path) -> naga::Module {
     let text = std::fs::read_to_string(path).expect("readable shader");
-    naga::front::wgsl::parse_str(&text)
-        .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(&text, &path.display().to_string())))
+    naga::front::wgsl::parse_str(&text).unwrap_or_else(|e| {
+        panic!(
+            "{}",
+            e.emit_to_string_with_path(&text, &path.display().to_string())
+        )
+    })
 }
 
 #[test]
@@ -87,11 +91,41 @@ macro_rules! check_layout {
 #[test]
 fn pod_mirrors_match_the_wgsl_layouts() {
     let module = parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/integrate.wgsl"));
-    check_layout!(&module, Params { gravity, h, particles, springs, one, _pad1 });
+    check_layout!(
+        &module,
+        Params {
+            gravity,
+            h,
+            particles,
+            springs,
+            one,
+            _pad1
+        }
+    );
     check_layout!(&module, Position { hi, lo });
-    check_layout!(&module, Spring { a, b, rest, p, q, wa, wb, _pad });
+    check_layout!(
+        &module,
+        Spring {
+            a,
+            b,
+            rest,
+            p,
+            q,
+            wa,
+            wb,
+            _pad
+        }
+    );
     check_layout!(&module, Entry { spring, coef });
-    check_layout!(&module, Range { start, count, _pad0, _pad1 });
+    check_layout!(
+        &module,
+        Range {
+            start,
+            count,
+            _pad0,
+            _pad1
+        }
+    );
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides
@@ -99,7 +133,10 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         .filter_map(|(_, o)| o.name.clone())
         .collect();
     for name in ["WORKGROUP", "RATE", "PINS", "UPDATE"] {
-        assert!(overrides.iter().any(|o| o == name), "override {name} missing: {overrides:?}");
+        assert!(
+            overrides.iter().any(|o| o == name),
+            "override {name} missing: {overrides:?}"
+        );
     }
 }
 
@@ -198,14 +235,20 @@ fn cpu_against_gpu(
     config: SimConfig,
     frames: usize,
 ) -> Result<(f64, f64), SimError> {
-    let mut cpu = Simulation::new(world_cpu, SimConfig {
-        backend: Backend::Cpu,
-        ..config
-    })?;
-    let mut gpu = Simulation::new(world_gpu, SimConfig {
-        backend: Backend::Gpu,
-        ..config
-    })?;
+    let mut cpu = Simulation::new(
+        world_cpu,
+        SimConfig {
+            backend: Backend::Cpu,
+            ..config
+        },
+    )?;
+    let mut gpu = Simulation::new(
+        world_gpu,
+        SimConfig {
+            backend: Backend::Gpu,
+            ..config
+        },
+    )?;
     assert_eq!(gpu.backend(), Backend::Gpu);
     gpu.gpu_solver().expect("on the GPU").poison();
     let mut worst: f64 = 0.0;
@@ -245,7 +288,8 @@ fn gpu_matches_cpu_on_random_scenes() {
         let regime = Some(trial / integrators.len());
         let n = 20 + rng.usize(0..60);
         let scene_seed = rng.u64(..);
-        let (world_cpu, omega, zeta) = random_scene(&mut fastrand::Rng::with_seed(scene_seed), n, regime);
+        let (world_cpu, omega, zeta) =
+            random_scene(&mut fastrand::Rng::with_seed(scene_seed), n, regime);
         let (world_gpu, ..) = random_scene(&mut fastrand::Rng::with_seed(scene_seed), n, regime);
         // Well inside every integrator's stable region (damping shrinks the explicit ones').
         let packed = harmonic::buffers::Packed::gather(&world_cpu).expect("valid");
@@ -367,7 +411,10 @@ fn integrators_without_a_gpu_kernel_are_a_clear_error() {
             auto_substeps: false,
             ..SimConfig::default()
         };
-        match (Kernel::of(integrator, false), Simulation::new(world, config)) {
+        match (
+            Kernel::of(integrator, false),
+            Simulation::new(world, config),
+        ) {
             (Some(_), Ok(sim)) => assert_eq!(sim.backend(), Backend::Gpu),
             (None, Err(SimError::Gpu(GpuError::NoKernel { integrator: i, .. }))) => {
                 assert_eq!(i, integrator)
@@ -382,7 +429,12 @@ fn integrators_without_a_gpu_kernel_are_a_clear_error() {
         backend: Backend::Auto,
         ..SimConfig::default()
     };
-    assert_eq!(Simulation::new(world, config).expect("CPU fallback").backend(), Backend::Cpu);
+    assert_eq!(
+        Simulation::new(world, config)
+            .expect("CPU fallback")
+            .backend(),
+        Backend::Cpu
+    );
 }
 
 #[test]

@@ -28,7 +28,11 @@ pub struct ScalingRow {
 
 /// A simulation of `scene` at the step automatic control picks for its frame step, then fixed
 /// at one substep per frame (the bench drives the substeps itself).
-fn simulation(scene: &Scene, integrator: Integrator, backend: Backend) -> Result<Simulation, SimError> {
+fn simulation(
+    scene: &Scene,
+    integrator: Integrator,
+    backend: Backend,
+) -> Result<Simulation, SimError> {
     let built = scene.build();
     let mut sim = Simulation::new(
         built.world,
@@ -76,9 +80,7 @@ fn rate(repeats: u32, mut run: impl FnMut(u32) -> Result<(), SimError>) -> Resul
 
 /// GPU substeps per second of a scene (state resident, one submit per batch, waited for).
 fn gpu_rate(sim: &mut Simulation, repeats: u32) -> Result<(f64, u64), SimError> {
-    let solver = sim
-        .gpu_solver()
-        .ok_or(crate::error::GpuError::NoAdapter)?;
+    let solver = sim.gpu_solver().ok_or(crate::error::GpuError::NoAdapter)?;
     let bytes = solver.bytes_per_substep();
     let r = rate(repeats, |k| {
         solver.run(k)?;
@@ -177,9 +179,13 @@ pub fn specialisations(
         let mut scene = hanging_cloth(n);
         let cloth = &mut scene.cloths[0];
         if !damped {
-            for s in [Some(&mut cloth.structural), cloth.shear.as_mut(), cloth.bend.as_mut()]
-                .into_iter()
-                .flatten()
+            for s in [
+                Some(&mut cloth.structural),
+                cloth.shear.as_mut(),
+                cloth.bend.as_mut(),
+            ]
+            .into_iter()
+            .flatten()
             {
                 s.damping = Some(0.0);
             }
@@ -229,7 +235,11 @@ pub fn report(
     progress("copy bandwidth");
     let bandwidth = copy_bandwidth(&ctx);
     let rows = scaling(sizes, integrator, repeats, cpu_max, &mut progress)?;
-    let spec_n = sizes.iter().copied().find(|&n| n >= 256).unwrap_or(sizes[0]);
+    let spec_n = sizes
+        .iter()
+        .copied()
+        .find(|&n| n >= 256)
+        .unwrap_or(sizes[0]);
     progress("specialisations");
     let specs = specialisations(spec_n, integrator, repeats)?;
     let mut md = String::new();
@@ -250,7 +260,10 @@ pub fn report(
     for r in &rows {
         let floor = bandwidth / r.bytes_per_substep as f64;
         let (cpu, ratio) = match r.cpu_substeps_per_s {
-            Some(c) => (format!("{c:.0}"), format!("{:.2}×", r.gpu_substeps_per_s / c)),
+            Some(c) => (
+                format!("{c:.0}"),
+                format!("{:.2}×", r.gpu_substeps_per_s / c),
+            ),
             None => ("-".into(), "-".into()),
         };
         let _ = writeln!(

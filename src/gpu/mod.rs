@@ -305,7 +305,11 @@ impl GpuContext {
             .lock()
             .map(|mut v| v.drain(..).collect::<Vec<_>>())
             .unwrap_or_default();
-        match e1.or(e2).map(|e| e.to_string()).or(stray.into_iter().next()) {
+        match e1
+            .or(e2)
+            .map(|e| e.to_string())
+            .or(stray.into_iter().next())
+        {
             Some(e) => Err(GpuError::Device {
                 adapter: self.describe(),
                 what: format!("{what}: {e}"),
@@ -552,7 +556,11 @@ impl GpuSolver {
             use wgpu::BufferUsages as U;
             let init = |label, bytes: &[u8], usage| {
                 // A binding may not be empty: a scene without springs still gets one element.
-                let bytes = if bytes.is_empty() { &[0u8; 32][..] } else { bytes };
+                let bytes = if bytes.is_empty() {
+                    &[0u8; 32][..]
+                } else {
+                    bytes
+                };
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some(label),
                     contents: bytes,
@@ -560,10 +568,18 @@ impl GpuSolver {
                 })
             };
             let rw = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-            let params = init("params", bytemuck::bytes_of(&params), U::UNIFORM | U::COPY_DST);
+            let params = init(
+                "params",
+                bytemuck::bytes_of(&params),
+                U::UNIFORM | U::COPY_DST,
+            );
             let pos = init("pos", bytemuck::cast_slice(&positions), rw);
             let vel = init("vel", bytemuck::cast_slice(&velocities), rw);
-            let springs = init("springs", bytemuck::cast_slice(host_springs), U::STORAGE | U::COPY_DST);
+            let springs = init(
+                "springs",
+                bytemuck::cast_slice(host_springs),
+                U::STORAGE | U::COPY_DST,
+            );
             let sdv = init("sdv", &poison(host_springs.len() * 16), rw);
             let offsets = init("offsets", bytemuck::cast_slice(&offsets), U::STORAGE);
             let entries = init("entries", bytemuck::cast_slice(&entries), U::STORAGE);
@@ -579,13 +595,34 @@ impl GpuSolver {
                 label: Some("integrate"),
                 layout,
                 entries: &[
-                    wgpu::BindGroupEntry { binding: 0, resource: entire(&params) },
-                    wgpu::BindGroupEntry { binding: 1, resource: entire(&pos) },
-                    wgpu::BindGroupEntry { binding: 2, resource: entire(&vel) },
-                    wgpu::BindGroupEntry { binding: 3, resource: entire(&springs) },
-                    wgpu::BindGroupEntry { binding: 4, resource: entire(&sdv) },
-                    wgpu::BindGroupEntry { binding: 5, resource: entire(&offsets) },
-                    wgpu::BindGroupEntry { binding: 6, resource: entire(&entries) },
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: entire(&params),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: entire(&pos),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: entire(&vel),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 3,
+                        resource: entire(&springs),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 4,
+                        resource: entire(&sdv),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 5,
+                        resource: entire(&offsets),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 6,
+                        resource: entire(&entries),
+                    },
                     wgpu::BindGroupEntry {
                         binding: 7,
                         resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -645,7 +682,9 @@ impl GpuSolver {
         ctx.scoped("step", || {
             let mut encoder = ctx
                 .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step") });
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("step"),
+                });
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("substeps"),
@@ -700,7 +739,9 @@ impl GpuSolver {
         ctx.scoped("read back", || {
             let mut encoder = ctx
                 .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read back") });
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("read back"),
+                });
             encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
             encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
             ctx.queue.submit([encoder.finish()]);

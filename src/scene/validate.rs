@@ -64,7 +64,10 @@ impl Scene {
         }
         if let Some(name) = &self.backend {
             if name.parse::<crate::Backend>().is_err() {
-                is.push("backend", format!("unknown `{name}` (known: cpu, gpu, auto)"));
+                is.push(
+                    "backend",
+                    format!("unknown `{name}` (known: cpu, gpu, auto)"),
+                );
             }
         }
         if let Some(t) = self.seconds {
