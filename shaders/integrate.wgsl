@@ -31,17 +31,15 @@ struct Position {
     lo: vec4<f32>,
 }
 
-// φ = p δ + q δ̇ (coefficients from integrate::harmonic, computed once per h on the CPU);
-// wa, wb: each end's share of the relative velocity change (m_b/(m_a+m_b), m_a/(m_a+m_b)).
-struct Spring {
-    a: u32,
-    b: u32,
+// A spring's ends are `ends[k]`; the rest is here. φ = p δ + q δ̇ (coefficients from
+// integrate::harmonic, computed once per h on the CPU); wa is end a's share of the relative
+// velocity change, m_b/(m_a+m_b) (0 when a is pinned), and end b's is 1 − wa. Two arrays, not
+// one struct, so no binding exceeds 128 MiB (lavapipe's limit) before 8 M springs.
+struct Coef {
     rest: f32,
     p: f32,
     q: f32,
     wa: f32,
-    wb: f32,
-    _pad: f32,
 }
 
 // One incident spring of a particle: sdv[spring] scaled by ±w.
@@ -62,11 +60,12 @@ struct Range {
 @group(0) @binding(1) var<storage, read_write> pos: array<Position>;
 // xyz velocity; w = 1 for a free particle, 0 for a pinned one.
 @group(0) @binding(2) var<storage, read_write> vel: array<vec4<f32>>;
-@group(0) @binding(3) var<storage, read> springs: array<Spring>;
-@group(0) @binding(4) var<storage, read_write> sdv: array<vec4<f32>>;
-@group(0) @binding(5) var<storage, read> offsets: array<u32>;
-@group(0) @binding(6) var<storage, read> entries: array<Entry>;
-@group(0) @binding(7) var<uniform> colour: Range;
+@group(0) @binding(3) var<storage, read> ends: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read> coefs: array<Coef>;
+@group(0) @binding(5) var<storage, read_write> sdv: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> offsets: array<u32>;
+@group(0) @binding(7) var<storage, read> entries: array<Entry>;
+@group(0) @binding(8) var<uniform> colour: Range;
 
 // A 2-D grid of workgroups (one dimension stops at 65,535) read as one index.
 fn linear(id: vec3<u32>, groups: vec3<u32>) -> u32 {
@@ -93,15 +92,15 @@ fn drift_by(i: u32, dx: vec3<f32>) {
 }
 
 // Mirrors integrate::spring_response: the unit axis n and φ = p δ + q δ̇.
-fn spring_response(s: Spring, va: vec3<f32>, vb: vec3<f32>) -> vec4<f32> {
-    let d = separation(s.a, s.b);
+fn spring_response(e: vec2<u32>, c: Coef, va: vec3<f32>, vb: vec3<f32>) -> vec4<f32> {
+    let d = separation(e.x, e.y);
     let len = length(d);
     let n = d / len;
-    let delta = len - s.rest;
-    var phi = s.p * delta;
+    let delta = len - c.rest;
+    var phi = c.p * delta;
     if RATE {
         let delta_dot = dot(n, vb - va);
-        phi += s.q * delta_dot;
+        phi += c.q * delta_dot;
     }
     return vec4<f32>(n, phi);
 }
@@ -113,14 +112,14 @@ fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
     if k >= params.springs {
         return;
     }
-    let s = springs[k];
+    let e = ends[k];
     var va = vec3<f32>(0.0);
     var vb = vec3<f32>(0.0);
     if RATE {
-        va = vel[s.a].xyz;
-        vb = vel[s.b].xyz;
+        va = vel[e.x].xyz;
+        vb = vel[e.y].xyz;
     }
-    let r = spring_response(s, va, vb);
+    let r = spring_response(e, coefs[k], va, vb);
     sdv[k] = vec4<f32>(r.w * r.xyz, 0.0);
 }
 
@@ -167,13 +166,15 @@ fn sweep_colour(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workg
     if j >= colour.count {
         return;
     }
-    let s = springs[colour.start + j];
-    let va = vel[s.a];
-    let vb = vel[s.b];
-    let r = spring_response(s, va.xyz, vb.xyz);
+    let k = colour.start + j;
+    let e = ends[k];
+    let c = coefs[k];
+    let va = vel[e.x];
+    let vb = vel[e.y];
+    let r = spring_response(e, c, va.xyz, vb.xyz);
     let dv = r.w * r.xyz;
-    vel[s.a] = vec4<f32>(va.xyz - s.wa * dv, va.w);
-    vel[s.b] = vec4<f32>(vb.xyz + s.wb * dv, vb.w);
+    vel[e.x] = vec4<f32>(va.xyz - c.wa * dv, va.w);
+    vel[e.y] = vec4<f32>(vb.xyz + (1.0 - c.wa) * dv, vb.w);
 }
 
 // Mirrors gauss_seidel::drift: x += h v on free particles.

@@ -145,3 +145,72 @@ fn check_locates_errors_and_fails() {
         String::from_utf8_lossy(&missing.stderr).contains("scenes/does_not_exist.ron: cannot read")
     );
 }
+
+#[test]
+fn backend_choice_on_the_command_line() {
+    let out = harmonic(&[
+        "run",
+        "scenes/chain.ron",
+        "--steps",
+        "2",
+        "--backend",
+        "cuda",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown backend `cuda`"));
+
+    // auto never fails for want of a GPU; it names what it ran on.
+    let out = harmonic(&[
+        "run",
+        "scenes/chain.ron",
+        "--steps",
+        "2",
+        "--backend",
+        "auto",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}");
+    assert!(stdout.contains("backend: "), "{stdout}");
+
+    // gpu: runs on an adapter, or says clearly why not.
+    let out = harmonic(&[
+        "run",
+        "scenes/hanging_cloth.ron",
+        "--seconds",
+        "0.1",
+        "--backend",
+        "gpu",
+    ]);
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    if out.status.success() {
+        assert!(stdout.contains("backend: gpu, adapter "), "{stdout}");
+        assert!(stdout.contains("non-finite: none"), "{stdout}");
+    } else {
+        assert!(
+            std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
+            "{stdout}\n{stderr}"
+        );
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+    }
+
+    // An integrator without a GPU kernel is refused by name.
+    let out = harmonic(&[
+        "run",
+        "scenes/chain.ron",
+        "--steps",
+        "2",
+        "--backend",
+        "gpu",
+        "--integrator",
+        "implicit-euler",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("implicit-euler has no GPU kernel"),
+        "{stderr}"
+    );
+}

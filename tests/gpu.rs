@@ -103,19 +103,7 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         }
     );
     check_layout!(&module, Position { hi, lo });
-    check_layout!(
-        &module,
-        Spring {
-            a,
-            b,
-            rest,
-            p,
-            q,
-            wa,
-            wb,
-            _pad
-        }
-    );
+    check_layout!(&module, Coef { rest, p, q, wa });
     check_layout!(&module, Entry { spring, coef });
     check_layout!(
         &module,

@@ -65,18 +65,14 @@ impl Position {
     }
 }
 
-/// `Spring`: ends, rest length, step coefficients and mass shares.
+/// `Coef`: a spring's rest length, step coefficients and end a's mass share (b's is 1 − wa).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-pub struct Spring {
-    pub a: u32,
-    pub b: u32,
+pub struct Coef {
     pub rest: f32,
     pub p: f32,
     pub q: f32,
     pub wa: f32,
-    pub wb: f32,
-    pub _pad: f32,
 }
 
 /// `Entry`: one incident spring of a particle.
@@ -240,11 +236,11 @@ impl GpuContext {
         };
         let info = adapter.get_info();
         let limits = adapter.limits();
-        if limits.max_storage_buffers_per_shader_stage < 6 {
+        if limits.max_storage_buffers_per_shader_stage < 7 {
             return Err(GpuError::Device {
                 adapter: describe(&info),
                 what: format!(
-                    "needs 6 storage buffers per shader stage, the adapter has {}",
+                    "needs 7 storage buffers per shader stage, the adapter has {}",
                     limits.max_storage_buffers_per_shader_stage
                 ),
             });
@@ -338,7 +334,7 @@ struct Buffers {
     params: wgpu::Buffer,
     pos: wgpu::Buffer,
     vel: wgpu::Buffer,
-    springs: wgpu::Buffer,
+    coefs: wgpu::Buffer,
     sdv: wgpu::Buffer,
     staging: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
@@ -361,8 +357,8 @@ pub struct GpuSolver {
     kernel: Kernel,
     /// Whether to specialise the shader to the scene (off only to measure what it buys).
     pub specialise: bool,
-    /// The host copy of the springs, in device order, for coefficient updates.
-    host_springs: Vec<Spring>,
+    /// The host copy of the spring coefficients, in device order, for step changes.
+    host_coefs: Vec<Coef>,
     h: f32,
 }
 
@@ -401,10 +397,11 @@ impl GpuSolver {
                     storage(1, false),
                     storage(2, false),
                     storage(3, true),
-                    storage(4, false),
-                    storage(5, true),
+                    storage(4, true),
+                    storage(5, false),
                     storage(6, true),
-                    uniform(7, true),
+                    storage(7, true),
+                    uniform(8, true),
                 ],
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -423,7 +420,7 @@ impl GpuSolver {
             buffers: None,
             kernel,
             specialise: true,
-            host_springs: Vec::new(),
+            host_coefs: Vec::new(),
             h: f32::NAN,
         })
     }
@@ -492,19 +489,22 @@ impl GpuSolver {
         for (j, &k) in order.iter().enumerate() {
             device_index[k as usize] = j as u32;
         }
-        self.host_springs = order
+        let ends: Vec<[u32; 2]> = order
+            .iter()
+            .map(|&k| {
+                let s = &packed.springs[k as usize];
+                [s.a, s.b]
+            })
+            .collect();
+        self.host_coefs = order
             .iter()
             .map(|&k| {
                 let (s, l) = (&packed.springs[k as usize], &lin[k as usize]);
-                Spring {
-                    a: s.a,
-                    b: s.b,
+                Coef {
                     rest: s.rest as f32,
                     p: l.p as f32,
                     q: l.q as f32,
                     wa: s.wa as f32,
-                    wb: s.wb as f32,
-                    _pad: 0.0,
                 }
             })
             .collect();
@@ -550,7 +550,7 @@ impl GpuSolver {
             ..Params::default()
         };
         let device = &self.ctx.device;
-        let host_springs = &self.host_springs;
+        let host_coefs = &self.host_coefs;
         let layout = &self.layout;
         let buffers = self.ctx.scoped("upload", || {
             use wgpu::BufferUsages as U;
@@ -575,12 +575,13 @@ impl GpuSolver {
             );
             let pos = init("pos", bytemuck::cast_slice(&positions), rw);
             let vel = init("vel", bytemuck::cast_slice(&velocities), rw);
-            let springs = init(
-                "springs",
-                bytemuck::cast_slice(host_springs),
+            let ends = init("ends", bytemuck::cast_slice(&ends), U::STORAGE);
+            let coefs = init(
+                "coefs",
+                bytemuck::cast_slice(host_coefs),
                 U::STORAGE | U::COPY_DST,
             );
-            let sdv = init("sdv", &poison(host_springs.len() * 16), rw);
+            let sdv = init("sdv", &poison(host_coefs.len() * 16), rw);
             let offsets = init("offsets", bytemuck::cast_slice(&offsets), U::STORAGE);
             let entries = init("entries", bytemuck::cast_slice(&entries), U::STORAGE);
             let colour = init("colours", &colour_bytes, U::UNIFORM);
@@ -609,22 +610,26 @@ impl GpuSolver {
                     },
                     wgpu::BindGroupEntry {
                         binding: 3,
-                        resource: entire(&springs),
+                        resource: entire(&ends),
                     },
                     wgpu::BindGroupEntry {
                         binding: 4,
-                        resource: entire(&sdv),
+                        resource: entire(&coefs),
                     },
                     wgpu::BindGroupEntry {
                         binding: 5,
-                        resource: entire(&offsets),
+                        resource: entire(&sdv),
                     },
                     wgpu::BindGroupEntry {
                         binding: 6,
-                        resource: entire(&entries),
+                        resource: entire(&offsets),
                     },
                     wgpu::BindGroupEntry {
                         binding: 7,
+                        resource: entire(&entries),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 8,
                         resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                             buffer: &colour,
                             offset: 0,
@@ -637,7 +642,7 @@ impl GpuSolver {
                 params,
                 pos,
                 vel,
-                springs,
+                coefs,
                 sdv,
                 staging,
                 bind_group,
@@ -652,7 +657,7 @@ impl GpuSolver {
         Ok(())
     }
 
-    /// A new step `h` with its coefficients: rewrites `h` and the springs' `p`, `q` only.
+    /// A new step `h` with its coefficients: rewrites `h` and the springs' coefficients only.
     pub fn set_step(&mut self, packed: &Packed, lin: &[Linear], h: f64) -> Result<(), GpuError> {
         let Some(b) = &self.buffers else {
             return Ok(());
@@ -660,12 +665,12 @@ impl GpuSolver {
         if self.h == h as f32 {
             return Ok(());
         }
-        for (s, &k) in self.host_springs.iter_mut().zip(&packed.colouring.springs) {
-            s.p = lin[k as usize].p as f32;
-            s.q = lin[k as usize].q as f32;
+        for (c, &k) in self.host_coefs.iter_mut().zip(&packed.colouring.springs) {
+            c.p = lin[k as usize].p as f32;
+            c.q = lin[k as usize].q as f32;
         }
         let q = &self.ctx.queue;
-        q.write_buffer(&b.springs, 0, bytemuck::cast_slice(&self.host_springs));
+        q.write_buffer(&b.coefs, 0, bytemuck::cast_slice(&self.host_coefs));
         // h is the 4th f32 of Params.
         q.write_buffer(&b.params, 12, bytemuck::bytes_of(&(h as f32)));
         self.h = h as f32;
@@ -801,12 +806,12 @@ impl GpuSolver {
             Kernel::Jacobi => {
                 // Spring pass: spring, two positions (and velocities), one sdv write.
                 // Particle pass: offsets, entries, sdv reads, position and velocity in and out.
-                let spring_pass = m * (32 + 16) + n * (pos + if rate { 16 } else { 0 });
+                let spring_pass = m * (8 + 16 + 16) + n * (pos + if rate { 16 } else { 0 });
                 let particle_pass = n * (4 + 2 * pos + 2 * 16) + 2 * m * (8 + 16);
                 spring_pass + particle_pass
             }
             Kernel::GaussSeidel { sweeps } => {
-                let sweep = m * 32 + n * (pos + 2 * 16);
+                let sweep = m * (8 + 16) + n * (pos + 2 * 16);
                 n * 2 * 16 + sweeps as u64 * sweep + n * (2 * pos + 16)
             }
         }
