@@ -44,6 +44,9 @@ fn empty(gravity: [f64; 3]) -> Scene {
         springs: vec![],
         cloths: vec![],
         ropes: vec![],
+        bodies: vec![],
+        contact: None,
+        attachments: vec![],
     }
 }
 

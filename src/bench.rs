@@ -41,6 +41,9 @@ pub fn hanging_cloth(n: u32) -> Scene {
             velocity: [0.0; 3],
         }],
         ropes: vec![],
+        bodies: vec![],
+        contact: None,
+        attachments: vec![],
     }
 }
 

@@ -35,12 +35,12 @@ pub mod backend;
 pub mod bench;
 pub mod buffers;
 pub mod components;
+pub mod contacts;
 pub mod error;
 #[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod integrate;
 pub mod metrics;
-#[cfg(feature = "rapier")]
 pub mod peer;
 pub mod scene;
 pub mod schedule;

@@ -3,19 +3,28 @@
 use std::time::Duration;
 
 /// The stages a frame runs, in this order. A stage a scene does not need is not in its
-/// schedule: without colliders there is no contact stage (there are no colliders yet).
+/// schedule: without bodies there is no contact stage and no rapier world.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
     /// World → packed buffers; runs only when the World changed since the last gather.
     Gather,
-    /// `substeps` steps of the integrator on the packed buffers.
+    /// `substeps` steps of the integrator on the packed buffers; with props, each substep is
+    /// followed by the contact stage.
     Integrate,
+    /// Per substep: rapier steps the bodies, attachments follow them, particles are pushed out
+    /// of colliders with friction, and dynamic bodies get the opposite impulses.
+    Contacts,
     /// Packed buffers → World (positions and velocities), once per frame.
     Scatter,
 }
 
 impl Stage {
-    pub const ORDER: [Stage; 3] = [Stage::Gather, Stage::Integrate, Stage::Scatter];
+    pub const ORDER: [Stage; 4] = [
+        Stage::Gather,
+        Stage::Integrate,
+        Stage::Contacts,
+        Stage::Scatter,
+    ];
 }
 
 /// Wall time of each stage in the last frame.
@@ -23,6 +32,8 @@ impl Stage {
 pub struct StepStats {
     pub gather: Duration,
     pub integrate: Duration,
+    /// The contact stage (zero without props).
+    pub contacts: Duration,
     pub scatter: Duration,
     /// Whether this frame re-gathered the World.
     pub gathered: bool,
@@ -31,6 +42,6 @@ pub struct StepStats {
 
 impl StepStats {
     pub fn total(&self) -> Duration {
-        self.gather + self.integrate + self.scatter
+        self.gather + self.integrate + self.contacts + self.scatter
     }
 }

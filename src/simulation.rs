@@ -8,6 +8,7 @@ use hecs::World;
 
 use crate::backend::Backend;
 use crate::buffers::Packed;
+use crate::contacts::Props;
 use crate::error::{Error, SimError};
 use crate::integrate::{Integrator, Solver};
 use crate::metrics;
@@ -91,6 +92,8 @@ pub struct Simulation {
     /// The GPU step, when the backend resolved to the GPU.
     #[cfg(feature = "gpu")]
     gpu: Option<crate::gpu::GpuSolver>,
+    /// Rigid props and the contact stage; None for a scene without bodies.
+    props: Option<Props>,
 }
 
 /// The GPU solver a config asks for: `None` runs on the CPU.
@@ -107,6 +110,15 @@ fn gpu_solver(config: &SimConfig) -> Result<Option<crate::gpu::GpuSolver>, SimEr
             .map(|ctx| GpuSolver::new(ctx, k))
             .transpose()?),
     }
+}
+
+/// Contacts run on the CPU. Under `auto` a scene with props runs there entirely; under `gpu`
+/// the springs run on the GPU and the state makes a round trip every substep for the contacts.
+fn props_backend(asked: Backend) -> Result<Backend, SimError> {
+    Ok(match asked {
+        Backend::Auto => Backend::Cpu,
+        b => b,
+    })
 }
 
 #[cfg(feature = "gpu")]
@@ -131,7 +143,20 @@ fn no_kernel(config: &SimConfig) -> SimError {
 impl Simulation {
     /// Takes a World of [`crate::Particle`], [`crate::Spring`] and [`crate::Pin`] components.
     pub fn new(world: World, config: SimConfig) -> Result<Self, SimError> {
+        Self::with_props(world, config, None)
+    }
+
+    /// As [`Self::new`], with rigid props: a rapier world whose colliders the cloth touches,
+    /// and [`crate::contacts::Attachment`] components on particles.
+    pub fn with_props(
+        world: World,
+        mut config: SimConfig,
+        props: Option<Props>,
+    ) -> Result<Self, SimError> {
         config.check()?;
+        if props.is_some() {
+            config.backend = props_backend(config.backend)?;
+        }
         let mut sim = Self {
             world,
             config,
@@ -145,6 +170,7 @@ impl Simulation {
             stats: StepStats::default(),
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
+            props,
         };
         #[cfg(not(feature = "gpu"))]
         if config.backend == Backend::Gpu {
@@ -156,7 +182,7 @@ impl Simulation {
 
     pub fn from_scene(scene: &Scene) -> Result<Self, SimError> {
         let built = scene.build();
-        Self::new(built.world, built.config)
+        Self::with_props(built.world, built.config, built.props)
     }
 
     /// Loads, validates and builds a scene file.
@@ -181,13 +207,49 @@ impl Simulation {
         let h = self.config.h();
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {
-            // Every substep in one submit; the state comes back once, for the scatter.
-            gpu.run(self.config.substeps)?;
-            gpu.read_back(&mut self.packed)?;
-            return self.finish_frame(t0, t1, gathered);
+            let mut contacts = std::time::Duration::ZERO;
+            match &mut self.props {
+                None => {
+                    // Every substep in one submit; the state comes back once, for the scatter.
+                    gpu.run(self.config.substeps)?;
+                    gpu.read_back(&mut self.packed)?;
+                }
+                Some(p) => {
+                    // Contacts run on the CPU: the state goes back and forth every substep.
+                    p.begin_frame();
+                    for _ in 0..self.config.substeps {
+                        p.begin_substep(&self.packed);
+                        gpu.run(1)?;
+                        gpu.read_back(&mut self.packed)?;
+                        let t = Instant::now();
+                        p.substep(&mut self.packed, h);
+                        contacts += t.elapsed();
+                        gpu.write_state(&self.packed);
+                    }
+                }
+            }
+            return self.finish_frame(t0, t1, gathered, contacts);
         }
         let (solver, packed, substeps) = (&mut self.solver, &mut self.packed, self.config.substeps);
-        let mut integrate = move || (0..substeps).try_for_each(|_| solver.substep(packed, h));
+        let mut props = self.props.as_mut();
+        let mut contacts = std::time::Duration::ZERO;
+        let contacts_time = &mut contacts;
+        if let Some(p) = props.as_mut() {
+            p.begin_frame();
+        }
+        let mut integrate = move || {
+            (0..substeps).try_for_each(|_| {
+                let Some(p) = props.as_mut() else {
+                    return solver.substep(packed, h);
+                };
+                p.begin_substep(packed);
+                solver.substep(packed, h)?;
+                let t = Instant::now();
+                p.substep(packed, h);
+                *contacts_time += t.elapsed();
+                Ok(())
+            })
+        };
         if self.parallel {
             // One rayon job per frame: the passes inside run from a worker's own deque, so
             // the only allocation is the injector's queue block, recycled every 63 frames.
@@ -195,7 +257,7 @@ impl Simulation {
         } else {
             integrate()?;
         }
-        self.finish_frame(t0, t1, gathered)
+        self.finish_frame(t0, t1, gathered, contacts)
     }
 
     /// The end of a frame: the finiteness check, then the scatter.
@@ -204,6 +266,7 @@ impl Simulation {
         t0: Instant,
         t1: Instant,
         gathered: bool,
+        contacts: std::time::Duration,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.steps += 1;
@@ -219,7 +282,8 @@ impl Simulation {
         let t3 = Instant::now();
         self.stats = StepStats {
             gather: t1 - t0,
-            integrate: t2 - t1,
+            integrate: (t2 - t1).saturating_sub(contacts),
+            contacts,
             scatter: t3 - t2,
             gathered,
             substeps: self.config.substeps,
@@ -233,6 +297,12 @@ impl Simulation {
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
+        if let Some(p) = &mut self.props {
+            if let Some(particle) = p.dangling(&self.world) {
+                return Err(SimError::DanglingAttachment { particle });
+            }
+            p.gather(&self.world, &self.packed);
+        }
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {
             let c = &self.config;
@@ -258,8 +328,11 @@ impl Simulation {
     }
 
     /// Changes the step settings; coefficients are recomputed on the next step.
-    pub fn set_config(&mut self, config: SimConfig) -> Result<(), SimError> {
+    pub fn set_config(&mut self, mut config: SimConfig) -> Result<(), SimError> {
         config.check()?;
+        if self.props.is_some() {
+            config.backend = props_backend(config.backend)?;
+        }
         let keep_solver = config.integrator == self.config.integrator
             && config.exact_displacement == self.config.exact_displacement
             && config.gravity == self.config.gravity;
@@ -285,6 +358,16 @@ impl Simulation {
             gpu.set_step(&self.packed, self.solver.coefficients(), self.config.h())?;
         }
         Ok(())
+    }
+
+    /// The rigid props (rapier world, contact statistics), when the scene has bodies.
+    pub fn props(&self) -> Option<&Props> {
+        self.props.as_ref()
+    }
+
+    /// Mutable props: move kinematic bodies, push dynamic ones, add colliders.
+    pub fn props_mut(&mut self) -> Option<&mut Props> {
+        self.props.as_mut()
     }
 
     /// The back end the integrate stage runs on: `Cpu` or `Gpu` (never `Auto`).

@@ -67,6 +67,9 @@ fn base(dt: f64, gravity: [f64; 3]) -> Scene {
         springs: vec![],
         cloths: vec![],
         ropes: vec![],
+        bodies: vec![],
+        contact: None,
+        attachments: vec![],
     }
 }
 

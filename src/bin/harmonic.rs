@@ -302,7 +302,8 @@ fn run(args: RunArgs) -> Result<(), String> {
         config.backend = name.parse().map_err(|e: SimError| e.to_string())?;
     }
     config.exact_displacement |= args.exact_displacement;
-    let sim = Simulation::new(built.world, config).map_err(|e| e.to_string())?;
+    let sim =
+        Simulation::with_props(built.world, config, built.props).map_err(|e| e.to_string())?;
     let mut sim = sim;
     let config = *sim.config();
     if args.every == 0 {
@@ -377,13 +378,32 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
 
+    if let Some(p) = sim.props() {
+        println!(
+            "props: {} bod(ies), contact thickness {} m, friction {} static / {} kinetic; rapier steps {}",
+            p.bodies().len(),
+            p.contact.thickness,
+            p.contact.friction,
+            p.contact.kinetic_friction,
+            if p.moving { "every substep" } else { "never (all bodies fixed)" }
+        );
+    }
     let mut max_strain = start.max_strain;
+    let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
+    let (mut t_integrate, mut t_contacts) = (0.0, 0.0);
     let t0 = Instant::now();
     let mut failure = None;
     for step in 1..=steps {
         if let Err(e) = sim.step() {
             failure = Some(e);
             break;
+        }
+        t_integrate += sim.stats().integrate.as_secs_f64();
+        t_contacts += sim.stats().contacts.as_secs_f64();
+        if let Some(p) = sim.props() {
+            contacts += p.stats.contacts;
+            max_depth = max_depth.max(p.stats.max_depth);
+            swept += p.stats.swept;
         }
         max_strain = max_strain.max(harmonic::metrics::max_strain(sim.packed()));
         if let Some(w) = traj.as_mut() {
@@ -405,6 +425,15 @@ fn run(args: RunArgs) -> Result<(), String> {
         done as f64 / wall,
         (m as f64 * substeps as f64) / wall / 1e6
     );
+    if sim.props().is_some() {
+        println!(
+            "contacts: {contacts} particle-collider contacts ({swept} by the swept test), deepest {max_depth:.3e} m inside; \
+             stage time: integrate {:.3} s, contacts {:.3} s ({:.0} % of integrate)",
+            t_integrate,
+            t_contacts,
+            100.0 * t_contacts / t_integrate.max(1e-12)
+        );
+    }
     println!(
         "max strain: {:.4} % (largest |δ|/l0 over the run)",
         100.0 * max_strain

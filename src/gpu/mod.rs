@@ -785,6 +785,17 @@ impl GpuSolver {
         Ok(())
     }
 
+    /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts).
+    pub fn write_state(&mut self, packed: &Packed) {
+        if let Some(b) = &self.buffers {
+            let positions: Vec<Position> =
+                packed.x.iter().map(|&x| Position::from_f64(x)).collect();
+            let q = &self.ctx.queue;
+            q.write_buffer(&b.pos, 0, bytemuck::cast_slice(&positions));
+            q.write_buffer(&b.vel, 0, bytemuck::cast_slice(&velocities(packed)));
+        }
+    }
+
     /// Overwrites the per-spring output buffer with NaN, so an element a pass fails to write
     /// shows up as a non-finite state (the parity tests call this before each run).
     pub fn poison(&mut self) {

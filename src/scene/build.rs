@@ -12,6 +12,8 @@ use crate::SimConfig;
 pub struct BuiltScene {
     pub world: World,
     pub config: SimConfig,
+    /// The rapier world of the scene's bodies; None without bodies (no contact stage then).
+    pub props: Option<crate::contacts::Props>,
 }
 
 impl SpringSpec {
@@ -201,7 +203,9 @@ impl Scene {
             .as_deref()
             .and_then(|n| n.parse::<Integrator>().ok())
             .unwrap_or_default();
+        let props = self.build_props(&mut b.world);
         BuiltScene {
+            props,
             world: b.world,
             config: SimConfig {
                 dt: self.dt,
@@ -217,5 +221,61 @@ impl Scene {
                     .unwrap_or_default(),
             },
         }
+    }
+
+    /// Scene index of a particle reference.
+    fn scene_index(&self, p: super::props::ParticleRef) -> Option<u32> {
+        use super::props::ParticleRef;
+        match p {
+            ParticleRef::Particle(k) => (k < self.particles.len()).then_some(k as u32),
+            ParticleRef::Cloth(c, col, row) => {
+                let before: u64 = self.particles.len() as u64
+                    + self.cloths[..c.min(self.cloths.len())]
+                        .iter()
+                        .map(|cl| cl.resolution.0 as u64 * cl.resolution.1 as u64)
+                        .sum::<u64>();
+                let cl = self.cloths.get(c)?;
+                (col < cl.resolution.0 && row < cl.resolution.1)
+                    .then(|| (before + row as u64 * cl.resolution.0 as u64 + col as u64) as u32)
+            }
+        }
+    }
+
+    /// Bodies into a rapier world, and attachments as components on their particles. Assumes
+    /// a validated scene: a body whose collider cannot be built is left out.
+    fn build_props(&self, world: &mut World) -> Option<crate::contacts::Props> {
+        use crate::contacts::{Attachment, Props};
+        if self.bodies.is_empty() {
+            return None;
+        }
+        let (props, handles) = Props::build(
+            &self.bodies,
+            self.contact.unwrap_or_default(),
+            self.gravity.into(),
+            world,
+        )
+        .ok()?;
+        let by_index: std::collections::HashMap<u32, (Entity, DVec3)> = world
+            .query::<(Entity, &SceneIndex, &Particle)>()
+            .iter()
+            .map(|(e, i, p)| (i.0, (e, p.position)))
+            .collect();
+        for a in &self.attachments {
+            let (Some(idx), Some(&body)) = (self.scene_index(a.particle), handles.get(a.body))
+            else {
+                continue;
+            };
+            let Some(&(entity, x)) = by_index.get(&idx) else {
+                continue;
+            };
+            let local = match a.local {
+                Some(p) => DVec3::from(p).as_vec3(),
+                None => props.physics.bodies[body]
+                    .position()
+                    .inverse_transform_point(x.as_vec3()),
+            };
+            let _ = world.insert_one(entity, Attachment { body, local });
+        }
+        Some(props)
     }
 }

@@ -14,6 +14,7 @@
 //! `damping_ratio` means `c = 2 ζ √(κ μ)`.
 
 mod build;
+pub mod props;
 mod validate;
 
 use std::path::{Path, PathBuf};
@@ -70,6 +71,15 @@ pub struct Scene {
     pub cloths: Vec<Cloth>,
     #[serde(default)]
     pub ropes: Vec<Rope>,
+    /// Rigid props (rapier bodies, one collider each). None: no contact stage, no rapier world.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bodies: Vec<props::BodyDef>,
+    /// The cloth's contact material (thickness, friction, restitution).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact: Option<props::ContactDef>,
+    /// Particles held at points of bodies.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub attachments: Vec<props::AttachmentDef>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]

@@ -169,6 +169,7 @@ impl Scene {
                 is.spec(&format!("{at}.bend"), s);
             }
         }
+        self.validate_props(&mut is);
         let total = self.particle_count();
         if total > MAX_PARTICLES {
             is.push(
@@ -177,5 +178,154 @@ impl Scene {
             );
         }
         is.0
+    }
+
+    fn validate_props(&self, is: &mut Issues) {
+        use super::props::{ParticleRef, Shape};
+        for (i, b) in self.bodies.iter().enumerate() {
+            let at = format!("bodies[{i}]");
+            is.finite(format!("{at}.position"), b.position);
+            is.finite(format!("{at}.rotation"), b.rotation);
+            is.finite(format!("{at}.velocity"), b.velocity);
+            is.finite(format!("{at}.angular_velocity"), b.angular_velocity);
+            match (b.mass, b.density) {
+                (Some(_), Some(_)) => is.push(&at, "give `mass` or `density`, not both"),
+                (Some(m), None) => is.positive(format!("{at}.mass"), m),
+                (None, Some(d)) => is.positive(format!("{at}.density"), d),
+                (None, None) => {}
+            }
+            is.non_negative(format!("{at}.friction"), b.friction);
+            is.non_negative(format!("{at}.restitution"), b.restitution);
+            let sh = format!("{at}.shape");
+            match &b.shape {
+                Shape::Ball { radius } => is.positive(format!("{sh}.radius"), *radius),
+                Shape::Cuboid { half_extents } => {
+                    for (k, h) in half_extents.iter().enumerate() {
+                        is.positive(format!("{sh}.half_extents[{k}]"), *h);
+                    }
+                }
+                Shape::Capsule {
+                    half_height,
+                    radius,
+                }
+                | Shape::Cylinder {
+                    half_height,
+                    radius,
+                } => {
+                    is.positive(format!("{sh}.half_height"), *half_height);
+                    is.positive(format!("{sh}.radius"), *radius);
+                }
+                Shape::ConvexHull { points } => {
+                    for (k, p) in points.iter().enumerate() {
+                        is.finite(format!("{sh}.points[{k}]"), *p);
+                    }
+                    if points.len() < 4 {
+                        is.push(
+                            &sh,
+                            format!("a convex hull needs ≥ 4 points, got {}", points.len()),
+                        );
+                    }
+                }
+                Shape::TriMesh { vertices, indices } => {
+                    for (k, p) in vertices.iter().enumerate() {
+                        is.finite(format!("{sh}.vertices[{k}]"), *p);
+                    }
+                    if indices.is_empty() {
+                        is.push(&sh, "a triangle mesh needs ≥ 1 triangle");
+                    }
+                    for (k, t) in indices.iter().enumerate() {
+                        if t.iter().any(|&v| v as usize >= vertices.len()) {
+                            is.push(
+                                format!("{sh}.indices[{k}]"),
+                                format!("{t:?} refers past the {} vertices", vertices.len()),
+                            );
+                        }
+                    }
+                }
+                Shape::HeightField { heights, scale } => {
+                    is.finite(format!("{sh}.scale"), *scale);
+                    let cols = heights.first().map_or(0, Vec::len);
+                    if heights.len() < 2 || cols < 2 {
+                        is.push(&sh, "a height field needs ≥ 2 rows and ≥ 2 columns");
+                    }
+                    for (r, row) in heights.iter().enumerate() {
+                        if row.len() != cols {
+                            is.push(
+                                format!("{sh}.heights[{r}]"),
+                                format!("has {} columns, row 0 has {cols}", row.len()),
+                            );
+                        }
+                        if row.iter().any(|h| !h.is_finite()) {
+                            is.push(format!("{sh}.heights[{r}]"), "must be finite");
+                        }
+                    }
+                }
+            }
+            if is.0.iter().all(|e| !e.location.starts_with(&sh)) {
+                if let Err(e) = crate::contacts::collider_of(&b.shape) {
+                    is.push(&sh, e);
+                }
+            }
+        }
+        if let Some(c) = &self.contact {
+            is.positive("contact.thickness", c.thickness);
+            is.non_negative("contact.friction", c.friction);
+            is.non_negative("contact.kinetic_friction", c.kinetic_friction);
+            if c.kinetic_friction > c.friction {
+                is.push(
+                    "contact.kinetic_friction",
+                    format!(
+                        "{} exceeds the static friction {}",
+                        c.kinetic_friction, c.friction
+                    ),
+                );
+            }
+            if !(0.0..=1.0).contains(&c.restitution) {
+                is.push(
+                    "contact.restitution",
+                    format!("must be in [0, 1], got {}", c.restitution),
+                );
+            }
+        }
+        for (i, a) in self.attachments.iter().enumerate() {
+            let at = format!("attachments[{i}]");
+            if a.body >= self.bodies.len() {
+                is.push(
+                    format!("{at}.body"),
+                    format!(
+                        "body {} does not exist ({} bodies)",
+                        a.body,
+                        self.bodies.len()
+                    ),
+                );
+            }
+            if let Some(p) = a.local {
+                is.finite(format!("{at}.local"), p);
+            }
+            match a.particle {
+                ParticleRef::Particle(k) if k >= self.particles.len() => is.push(
+                    format!("{at}.particle"),
+                    format!(
+                        "particle {k} does not exist ({} particles)",
+                        self.particles.len()
+                    ),
+                ),
+                ParticleRef::Cloth(c, col, row) => match self.cloths.get(c) {
+                    None => is.push(
+                        format!("{at}.particle"),
+                        format!("cloth {c} does not exist"),
+                    ),
+                    Some(cl) if col >= cl.resolution.0 || row >= cl.resolution.1 => is.push(
+                        format!("{at}.particle"),
+                        format!(
+                            "({col}, {row}) is outside cloth {c}'s {}×{} grid",
+                            cl.resolution.0, cl.resolution.1
+                        ),
+                    ),
+                    Some(_) => {}
+                },
+                _ => {}
+            }
+        }
     }
 }

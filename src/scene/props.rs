@@ -1,0 +1,144 @@
+//! Rigid props in a scene: rapier bodies with one collider each, the cloth's contact material,
+//! and attachments of particles to bodies.
+
+use serde::{Deserialize, Serialize};
+
+use super::V3;
+
+/// How a body moves.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+pub enum BodyKind {
+    /// Never moves.
+    Fixed,
+    /// Moved by gravity, contacts with other bodies and the cloth's impulses.
+    Dynamic,
+    /// Moves at its `velocity` and `angular_velocity` whatever pushes it (a character).
+    Kinematic,
+}
+
+/// A collider shape, in the body's frame. Lengths in metres.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+pub enum Shape {
+    Ball {
+        radius: f64,
+    },
+    Cuboid {
+        half_extents: V3,
+    },
+    /// Along the body's y axis.
+    Capsule {
+        half_height: f64,
+        radius: f64,
+    },
+    /// Along the body's y axis.
+    Cylinder {
+        half_height: f64,
+        radius: f64,
+    },
+    ConvexHull {
+        points: Vec<V3>,
+    },
+    TriMesh {
+        vertices: Vec<V3>,
+        indices: Vec<[u32; 3]>,
+    },
+    /// `heights[row][col]` on a grid spanning `scale.x` × `scale.z`, heights times `scale.y`,
+    /// centred on the body.
+    HeightField {
+        heights: Vec<Vec<f64>>,
+        scale: V3,
+    },
+}
+
+/// A rigid body with one collider.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BodyDef {
+    pub kind: BodyKind,
+    pub shape: Shape,
+    #[serde(default)]
+    pub position: V3,
+    /// Axis-angle (axis times angle in radians).
+    #[serde(default)]
+    pub rotation: V3,
+    #[serde(default)]
+    pub velocity: V3,
+    #[serde(default)]
+    pub angular_velocity: V3,
+    /// kg/m³ (default 1000); give this or `mass`.
+    #[serde(default)]
+    pub density: Option<f64>,
+    /// kg; give this or `density`.
+    #[serde(default)]
+    pub mass: Option<f64>,
+    /// Coulomb friction of the collider, combined with the cloth's by averaging (rapier's rule).
+    #[serde(default = "default_body_friction")]
+    pub friction: f64,
+    /// Restitution against other bodies.
+    #[serde(default)]
+    pub restitution: f64,
+}
+
+fn default_body_friction() -> f64 {
+    0.5
+}
+
+/// The cloth's contact material.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ContactDef {
+    /// Particles are kept this far outside every collider (m).
+    #[serde(default = "default_thickness")]
+    pub thickness: f64,
+    /// Static friction coefficient of the cloth.
+    #[serde(default = "default_friction")]
+    pub friction: f64,
+    /// Kinetic friction coefficient of the cloth (≤ `friction`).
+    #[serde(default = "default_kinetic")]
+    pub kinetic_friction: f64,
+    /// Fraction of the normal approach speed a particle keeps, bouncing off (0 to 1).
+    #[serde(default)]
+    pub restitution: f64,
+}
+
+impl Default for ContactDef {
+    fn default() -> Self {
+        Self {
+            thickness: default_thickness(),
+            friction: default_friction(),
+            kinetic_friction: default_kinetic(),
+            restitution: 0.0,
+        }
+    }
+}
+
+fn default_thickness() -> f64 {
+    0.01
+}
+fn default_friction() -> f64 {
+    0.5
+}
+fn default_kinetic() -> f64 {
+    0.4
+}
+
+/// A particle of the scene.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+pub enum ParticleRef {
+    /// Index into `particles`.
+    Particle(usize),
+    /// `(cloth, column, row)` of `cloths`.
+    Cloth(usize, u32, u32),
+}
+
+/// A particle held at a point of a body: it follows the body; a dynamic body feels its pull.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AttachmentDef {
+    pub particle: ParticleRef,
+    /// Index into `bodies`.
+    pub body: usize,
+    /// The point in the body's frame (default: where the particle starts).
+    #[serde(default)]
+    pub local: Option<V3>,
+}
