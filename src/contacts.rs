@@ -23,6 +23,7 @@ use rapier3d::prelude::{
     Collider, ColliderBuilder, ColliderHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
     RigidBodySet,
 };
+use rayon::prelude::*;
 
 use crate::buffers::Packed;
 use crate::scene::props::{BodyDef, BodyKind, ContactDef, Shape};
@@ -255,47 +256,88 @@ impl Props {
             let (lo, hi) = (b.mins.as_dvec3(), b.maxs.as_dvec3());
             let mu_s = 0.5 * (c.friction + co.friction() as f64);
             let mu_k = (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s);
-            for i in 0..packed.x.len() {
-                if packed.inv_mass[i] == 0.0 {
-                    continue;
+            let body = co.parent().and_then(|p| bodies.get(p));
+            let dynamic = body.is_some_and(|b| b.is_dynamic());
+            let com = body.map_or(Vec3::ZERO, |b| b.center_of_mass()).as_dvec3();
+            let prev = &self.prev;
+            let Packed {
+                x,
+                v,
+                inv_mass,
+                mass,
+                ..
+            } = packed;
+            let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
+            // Particles in fixed chunks, each summing its impulses on the body, then the sums in
+            // chunk order: the same result whatever the thread count.
+            let sums: Vec<Exchange> = x
+                .par_chunks_mut(CHUNK)
+                .zip(v.par_chunks_mut(CHUNK))
+                .enumerate()
+                .map(|(k, (xs, vs))| {
+                    let mut sum = Exchange::default();
+                    for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
+                        let i = k * CHUNK + j;
+                        if inv_mass[i] == 0.0 {
+                            continue;
+                        }
+                        let (x0, x1) = (prev[i], *xi);
+                        // Broad phase, fine: this particle's path against this collider's box.
+                        if x0.min(x1).cmpgt(hi).any() || x0.max(x1).cmplt(lo).any() {
+                            continue;
+                        }
+                        let Some(hit) = surface(co, x0, x1, c.thickness) else {
+                            continue;
+                        };
+                        sum.contacts += 1;
+                        sum.max_depth = sum.max_depth.max(hit.depth);
+                        sum.swept += usize::from(hit.swept);
+                        *xi = hit.point + hit.normal * c.thickness;
+                        let vb = body.map_or(DVec3::ZERO, |b| {
+                            b.velocity_at_point(hit.point.as_vec3()).as_dvec3()
+                        });
+                        let old = *vi;
+                        let rel = old - vb;
+                        let vn = rel.dot(hit.normal);
+                        if vn >= 0.0 {
+                            continue;
+                        }
+                        let dvn = -(1.0 + c.restitution) * vn;
+                        let vt = rel - vn * hit.normal;
+                        let speed = vt.length();
+                        let vt = if speed <= mu_s * dvn {
+                            DVec3::ZERO
+                        } else {
+                            vt * (1.0 - mu_k * dvn / speed).max(0.0)
+                        };
+                        *vi = vb + (vn + dvn) * hit.normal + vt;
+                        if dynamic {
+                            // The body gets −J at the contact point: force and torque.
+                            let j = mass[i] * (*vi - old);
+                            sum.impulse -= j;
+                            sum.torque -= (hit.point - com).cross(j);
+                        }
+                    }
+                    sum
+                })
+                .collect();
+            let mut total = Exchange::default();
+            for s in &sums {
+                total.contacts += s.contacts;
+                total.swept += s.swept;
+                total.max_depth = total.max_depth.max(s.max_depth);
+                total.impulse += s.impulse;
+                total.torque += s.torque;
+            }
+            self.stats.contacts += total.contacts;
+            self.stats.swept += total.swept;
+            self.stats.max_depth = self.stats.max_depth.max(total.max_depth);
+            if dynamic && total.contacts > 0 {
+                if let Some(b) = co.parent().and_then(|p| bodies.get_mut(p)) {
+                    b.apply_impulse(total.impulse.as_vec3(), true);
+                    b.apply_torque_impulse(total.torque.as_vec3(), true);
                 }
-                let (x0, x1) = (self.prev[i], packed.x[i]);
-                // Broad phase, fine: this particle's path against this collider's box.
-                if x0.min(x1).cmpgt(hi).any() || x0.max(x1).cmplt(lo).any() {
-                    continue;
-                }
-                let Some(hit) = surface(co, x0, x1, c.thickness) else {
-                    continue;
-                };
-                self.stats.contacts += 1;
-                self.stats.max_depth = self.stats.max_depth.max(hit.depth);
-                self.stats.swept += usize::from(hit.swept);
-                packed.x[i] = hit.point + hit.normal * c.thickness;
-                let body = co.parent().and_then(|p| bodies.get_mut(p));
-                let vb = body.as_ref().map_or(DVec3::ZERO, |b| {
-                    b.velocity_at_point(hit.point.as_vec3()).as_dvec3()
-                });
-                let v = packed.v[i];
-                let rel = v - vb;
-                let vn = rel.dot(hit.normal);
-                if vn >= 0.0 {
-                    continue;
-                }
-                let dvn = -(1.0 + c.restitution) * vn;
-                let vt = rel - vn * hit.normal;
-                let speed = vt.length();
-                let vt = if speed <= mu_s * dvn {
-                    DVec3::ZERO
-                } else {
-                    vt * (1.0 - mu_k * dvn / speed).max(0.0)
-                };
-                let new = vb + (vn + dvn) * hit.normal + vt;
-                packed.v[i] = new;
-                if let Some(body) = body.filter(|b| b.is_dynamic()) {
-                    let j = packed.mass[i] * (new - v);
-                    body.apply_impulse_at_point(-j.as_vec3(), hit.point.as_vec3(), true);
-                    self.stats.impulse_on_bodies -= j;
-                }
+                self.stats.impulse_on_bodies += total.impulse;
             }
         }
     }
@@ -303,6 +345,20 @@ impl Props {
     pub fn bodies(&self) -> &RigidBodySet {
         &self.physics.bodies
     }
+}
+
+/// Particles per parallel task of the contact stage.
+const CHUNK: usize = 1024;
+
+/// What one chunk of particles did against one collider.
+#[derive(Clone, Copy, Default)]
+struct Exchange {
+    contacts: usize,
+    swept: usize,
+    max_depth: f64,
+    /// Impulse and angular impulse (about the centre of mass) on the body.
+    impulse: DVec3,
+    torque: DVec3,
 }
 
 /// Where a particle meets a collider this substep.
