@@ -32,21 +32,10 @@ fn spec(stiffness: f64, zeta: f64) -> SpringSpec {
 
 fn empty(gravity: [f64; 3]) -> Scene {
     Scene {
-        name: None,
-        dt: T,
         substeps: Some(1),
         gravity,
-        backend: None,
-        integrator: None,
-        exact_displacement: false,
         seconds: Some(T),
-        particles: vec![],
-        springs: vec![],
-        cloths: vec![],
-        ropes: vec![],
-        bodies: vec![],
-        contact: None,
-        attachments: vec![],
+        ..Scene::new(T)
     }
 }
 

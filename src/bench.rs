@@ -19,15 +19,8 @@ pub fn hanging_cloth(n: u32) -> Scene {
     };
     Scene {
         name: Some(format!("hanging cloth {n}×{n}")),
-        dt: 1e-4,
         substeps: Some(1),
         gravity: [0.0, -9.81, 0.0],
-        backend: None,
-        integrator: None,
-        exact_displacement: false,
-        seconds: None,
-        particles: vec![],
-        springs: vec![],
         cloths: vec![Cloth {
             origin: [-0.5, 1.0, 0.0],
             size: (1.0, 1.0),
@@ -40,10 +33,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             pins: vec![Anchor::TopLeft, Anchor::TopRight],
             velocity: [0.0; 3],
         }],
-        ropes: vec![],
-        bodies: vec![],
-        contact: None,
-        attachments: vec![],
+        ..Scene::new(1e-4)
     }
 }
 

@@ -68,7 +68,8 @@ pub struct Props {
     attached: Vec<(usize, Attachment)>,
     /// Positions at the start of the substep (for the swept test).
     prev: Vec<DVec3>,
-    candidates: Vec<ColliderHandle>,
+    /// Colliders near the cloth this substep, with their boxes grown by the thickness.
+    candidates: Vec<(ColliderHandle, DVec3, DVec3)>,
     pub stats: ContactStats,
 }
 
@@ -243,17 +244,16 @@ impl Props {
         for (handle, co) in self.physics.colliders.iter() {
             let b = co.compute_aabb().loosened(margin);
             if b.mins.cmple(cloth_box.1).all() && b.maxs.cmpge(cloth_box.0).all() {
-                self.candidates.push(handle);
+                self.candidates
+                    .push((handle, b.mins.as_dvec3(), b.maxs.as_dvec3()));
             }
         }
         if self.candidates.is_empty() {
             return;
         }
         let (colliders, bodies) = (&self.physics.colliders, &mut self.physics.bodies);
-        for &handle in &self.candidates {
+        for &(handle, lo, hi) in &self.candidates {
             let co = &colliders[handle];
-            let b = co.compute_aabb().loosened(margin);
-            let (lo, hi) = (b.mins.as_dvec3(), b.maxs.as_dvec3());
             let mu_s = 0.5 * (c.friction + co.friction() as f64);
             let mu_k = (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s);
             let body = co.parent().and_then(|p| bodies.get(p));

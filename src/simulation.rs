@@ -114,11 +114,20 @@ fn gpu_solver(config: &SimConfig) -> Result<Option<crate::gpu::GpuSolver>, SimEr
 
 /// Contacts run on the CPU. Under `auto` a scene with props runs there entirely; under `gpu`
 /// the springs run on the GPU and the state makes a round trip every substep for the contacts.
-fn props_backend(asked: Backend) -> Result<Backend, SimError> {
-    Ok(match asked {
+fn props_backend(asked: Backend) -> Backend {
+    match asked {
         Backend::Auto => Backend::Cpu,
         b => b,
-    })
+    }
+}
+
+/// A build without the `gpu` feature refuses `Backend::Gpu` (`auto` falls back to the CPU).
+#[cfg(not(feature = "gpu"))]
+fn refuse_gpu(config: &SimConfig) -> Result<(), SimError> {
+    if config.backend == Backend::Gpu {
+        return Err(crate::error::GpuError::NotBuilt.into());
+    }
+    Ok(())
 }
 
 #[cfg(feature = "gpu")]
@@ -155,7 +164,7 @@ impl Simulation {
     ) -> Result<Self, SimError> {
         config.check()?;
         if props.is_some() {
-            config.backend = props_backend(config.backend)?;
+            config.backend = props_backend(config.backend);
         }
         let mut sim = Self {
             world,
@@ -173,9 +182,7 @@ impl Simulation {
             props,
         };
         #[cfg(not(feature = "gpu"))]
-        if config.backend == Backend::Gpu {
-            return Err(crate::error::GpuError::NotBuilt.into());
-        }
+        refuse_gpu(&config)?;
         sim.gather()?;
         Ok(sim)
     }
@@ -331,22 +338,18 @@ impl Simulation {
     pub fn set_config(&mut self, mut config: SimConfig) -> Result<(), SimError> {
         config.check()?;
         if self.props.is_some() {
-            config.backend = props_backend(config.backend)?;
+            config.backend = props_backend(config.backend);
         }
         let keep_solver = config.integrator == self.config.integrator
             && config.exact_displacement == self.config.exact_displacement
             && config.gravity == self.config.gravity;
-        let same_backend = keep_solver && config.backend == self.config.backend;
         #[cfg(feature = "gpu")]
-        if !same_backend {
+        if !(keep_solver && config.backend == self.config.backend) {
             self.gpu = gpu_solver(&config)?;
             self.dirty = true;
         }
         #[cfg(not(feature = "gpu"))]
-        if config.backend == Backend::Gpu {
-            return Err(crate::error::GpuError::NotBuilt.into());
-        }
-        let _ = same_backend;
+        refuse_gpu(&config)?;
         self.config = config;
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);

@@ -55,21 +55,9 @@ fn spec(stiffness: f64, zeta: f64) -> SpringSpec {
 
 fn base(dt: f64, gravity: [f64; 3]) -> Scene {
     Scene {
-        name: None,
-        dt,
         substeps: Some(1),
         gravity,
-        backend: None,
-        integrator: None,
-        exact_displacement: false,
-        seconds: None,
-        particles: vec![],
-        springs: vec![],
-        cloths: vec![],
-        ropes: vec![],
-        bodies: vec![],
-        contact: None,
-        attachments: vec![],
+        ..Scene::new(dt)
     }
 }
 

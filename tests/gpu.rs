@@ -5,6 +5,8 @@
 //! `HARMONIC_REQUIRE_GPU` is set (CI sets it: it has Mesa's lavapipe).
 #![cfg(feature = "gpu")]
 
+mod common;
+
 use std::mem::{offset_of, size_of};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -144,18 +146,6 @@ fn context() -> Option<Arc<GpuContext>> {
     }
 }
 
-/// A seed from the clock, or `HARMONIC_SEED` to replay one.
-fn seed() -> u64 {
-    std::env::var("HARMONIC_SEED")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| {
-            std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(1, |d| d.as_nanos() as u64)
-        })
-}
-
 /// A random blob of particles and springs: masses over three decades, about a tenth pinned,
 /// each spring in one of the damping regimes (undamped, under-, critically, over-damped).
 /// Returns the World and the largest `ω0` and `ζ` of any spring.
@@ -267,7 +257,7 @@ const BOUNDED: f64 = 10.0;
 #[test]
 fn gpu_matches_cpu_on_random_scenes() {
     let Some(_ctx) = context() else { return };
-    let seed = seed();
+    let seed = common::seed();
     let mut rng = fastrand::Rng::with_seed(seed);
     let integrators = Kernel::supported().collect::<Vec<_>>();
     let mut report = Vec::new();

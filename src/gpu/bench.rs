@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use crate::backend::Backend;
 use crate::bench::hanging_cloth;
 use crate::error::SimError;
-use crate::gpu::{GpuContext, GpuSolver};
+use crate::gpu::GpuContext;
 use crate::integrate::Integrator;
 use crate::scene::Scene;
 use crate::simulation::{SimConfig, Simulation};
@@ -287,15 +287,4 @@ pub fn report(
         let _ = writeln!(md, "| {label} | {spec} | {s:.0} | {g:.0} | {:.2}× |", s / g);
     }
     Ok(md)
-}
-
-impl GpuSolver {
-    /// Blocks until the queued substeps have run.
-    pub fn finish(&self) -> Result<(), crate::error::GpuError> {
-        self.context()
-            .device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map(|_| ())
-            .map_err(|e| crate::error::GpuError::Readback(e.to_string()))
-    }
 }

@@ -359,6 +359,9 @@ pub struct GpuSolver {
     pub specialise: bool,
     /// The host copy of the spring coefficients, in device order, for step changes.
     host_coefs: Vec<Coef>,
+    /// Host scratch for state uploads.
+    host_pos: Vec<Position>,
+    host_vel: Vec<[f32; 4]>,
     h: f32,
 }
 
@@ -421,6 +424,8 @@ impl GpuSolver {
             kernel,
             specialise: true,
             host_coefs: Vec::new(),
+            host_pos: Vec::new(),
+            host_vel: Vec::new(),
             h: f32::NAN,
         })
     }
@@ -508,8 +513,8 @@ impl GpuSolver {
                 }
             })
             .collect();
-        let positions: Vec<Position> = packed.x.iter().map(|&x| Position::from_f64(x)).collect();
-        let velocities = velocities(packed);
+        fill_state(packed, &mut self.host_pos, &mut self.host_vel);
+        let (positions, velocities) = (&self.host_pos, &self.host_vel);
         let inc = &packed.incidence;
         let offsets = inc.offsets.clone();
         let entries: Vec<Entry> = inc
@@ -573,8 +578,8 @@ impl GpuSolver {
                 bytemuck::bytes_of(&params),
                 U::UNIFORM | U::COPY_DST,
             );
-            let pos = init("pos", bytemuck::cast_slice(&positions), rw);
-            let vel = init("vel", bytemuck::cast_slice(&velocities), rw);
+            let pos = init("pos", bytemuck::cast_slice(positions), rw);
+            let vel = init("vel", bytemuck::cast_slice(velocities), rw);
             let ends = init("ends", bytemuck::cast_slice(&ends), U::STORAGE);
             let coefs = init(
                 "coefs",
@@ -596,38 +601,14 @@ impl GpuSolver {
                 label: Some("integrate"),
                 layout,
                 entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: entire(&params),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: entire(&pos),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: entire(&vel),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 3,
-                        resource: entire(&ends),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 4,
-                        resource: entire(&coefs),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: entire(&sdv),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 6,
-                        resource: entire(&offsets),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 7,
-                        resource: entire(&entries),
-                    },
+                    entry(0, &params),
+                    entry(1, &pos),
+                    entry(2, &vel),
+                    entry(3, &ends),
+                    entry(4, &coefs),
+                    entry(5, &sdv),
+                    entry(6, &offsets),
+                    entry(7, &entries),
                     wgpu::BindGroupEntry {
                         binding: 8,
                         resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -785,15 +766,24 @@ impl GpuSolver {
         Ok(())
     }
 
-    /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts).
+    /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts),
+    /// through host scratch sized at gather.
     pub fn write_state(&mut self, packed: &Packed) {
         if let Some(b) = &self.buffers {
-            let positions: Vec<Position> =
-                packed.x.iter().map(|&x| Position::from_f64(x)).collect();
+            fill_state(packed, &mut self.host_pos, &mut self.host_vel);
             let q = &self.ctx.queue;
-            q.write_buffer(&b.pos, 0, bytemuck::cast_slice(&positions));
-            q.write_buffer(&b.vel, 0, bytemuck::cast_slice(&velocities(packed)));
+            q.write_buffer(&b.pos, 0, bytemuck::cast_slice(&self.host_pos));
+            q.write_buffer(&b.vel, 0, bytemuck::cast_slice(&self.host_vel));
         }
+    }
+
+    /// Blocks until the queued substeps have run.
+    pub fn finish(&self) -> Result<(), GpuError> {
+        self.ctx
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
     }
 
     /// Overwrites the per-spring output buffer with NaN, so an element a pass fails to write
@@ -829,21 +819,24 @@ impl GpuSolver {
     }
 }
 
-/// Free particles get `w = 1`, pinned ones `w = 0` (the shader's pin mask).
-fn entire(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
-    b.as_entire_binding()
+/// Binding `binding` to the whole of `buffer`.
+fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
 }
 
-fn velocities(packed: &Packed) -> Vec<[f32; 4]> {
-    packed
-        .v
-        .iter()
-        .zip(&packed.inv_mass)
-        .map(|(v, &im)| {
-            let v = v.as_vec3();
-            [v.x, v.y, v.z, if im == 0.0 { 0.0 } else { 1.0 }]
-        })
-        .collect()
+/// The device form of the state: compensated positions, and velocities whose `w` is 1 for a
+/// free particle and 0 for a pinned one (the shader's pin mask).
+fn fill_state(packed: &Packed, pos: &mut Vec<Position>, vel: &mut Vec<[f32; 4]>) {
+    pos.clear();
+    pos.extend(packed.x.iter().map(|&x| Position::from_f64(x)));
+    vel.clear();
+    vel.extend(packed.v.iter().zip(&packed.inv_mass).map(|(v, &im)| {
+        let v = v.as_vec3();
+        [v.x, v.y, v.z, if im == 0.0 { 0.0 } else { 1.0 }]
+    }));
 }
 
 /// `len` bytes of f32 NaN.

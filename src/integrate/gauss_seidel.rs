@@ -66,7 +66,8 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
                 phi += l.s * f[k];
             }
             *va -= s.wa * phi * n;
-            *vb += s.wb * phi * n;
+            // End b's share is 1 − wa (shaders/integrate.wgsl stores wa only).
+            *vb += (1.0 - s.wa) * phi * n;
         });
     }
 }

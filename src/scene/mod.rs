@@ -211,6 +211,28 @@ pub struct Rope {
 }
 
 impl Scene {
+    /// An empty scene stepping `dt` with the schema's defaults (automatic substeps, standard
+    /// gravity, default integrator and back end); tools fill in the rest.
+    pub fn new(dt: f64) -> Scene {
+        Scene {
+            name: None,
+            dt,
+            substeps: None,
+            gravity: default_gravity(),
+            integrator: None,
+            backend: None,
+            exact_displacement: false,
+            seconds: None,
+            particles: vec![],
+            springs: vec![],
+            cloths: vec![],
+            ropes: vec![],
+            bodies: vec![],
+            contact: None,
+            attachments: vec![],
+        }
+    }
+
     /// Reads, parses and validates a scene file.
     pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
         let path = path.as_ref();
