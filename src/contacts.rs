@@ -19,14 +19,15 @@ use glam::{DVec3, Vec3};
 use hecs::{Entity, World};
 use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
+use rapier3d::parry::shape::Shape as ParryShape;
 use rapier3d::prelude::{
-    Collider, ColliderBuilder, ColliderHandle, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle,
-    RigidBodySet,
+    ColliderBuilder, ColliderHandle, ColliderSet, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
+    RigidBodyHandle, RigidBodySet, RigidBodyType,
 };
 use rayon::prelude::*;
 
 use crate::buffers::Packed;
-use crate::scene::props::{BodyDef, BodyKind, ContactDef, Shape};
+use crate::scene::props::{BodyDef, BodyKind, ContactDef, Keyframe, Shape};
 
 /// A body of the scene, as an ECS component on its own entity (the rapier handles stay opaque:
 /// the sets live in [`Props`]).
@@ -56,27 +57,91 @@ pub struct ContactStats {
     pub impulse_on_bodies: DVec3,
 }
 
-/// The rigid side of a scene: rapier's world and the cloth's contact material.
+/// The rigid side of a scene: rapier's world, the bodies driven along paths, and the contact
+/// stage.
 pub struct Props {
     pub physics: PhysicsWorld,
-    pub contact: ContactDef,
     /// Some body can move: rapier steps each substep.
     pub moving: bool,
     /// Some body is dynamic: impulses go back to bodies.
     pub dynamic: bool,
+    /// Position-driven bodies following keyframed paths from the scene.
+    paths: Vec<(RigidBodyHandle, Vec<Keyframe>)>,
+    /// Position-driven bodies moved through the API this frame: (body, start, target).
+    driven: Vec<(RigidBodyHandle, Pose, Pose)>,
+    /// Simulated time of the paths (s).
+    time: f64,
+    /// Substep within the frame, and substeps per frame.
+    substep: u32,
+    substeps: u32,
+    stage: ContactStage,
+}
+
+/// The contact stage's buffers and statistics: attachments, then particles against colliders.
+/// It owns no rapier state, so it runs against the engine's sets or a caller's.
+pub struct ContactStage {
+    pub contact: ContactDef,
     /// Attached particles as packed indices, refreshed at gather.
     attached: Vec<(usize, Attachment)>,
+    /// Per packed particle: attached (placed by its body, so no contacts).
+    held: Vec<bool>,
     /// Positions at the start of the substep (for the swept test).
     prev: Vec<DVec3>,
-    /// Colliders near the cloth this substep, with their boxes grown by the thickness.
-    candidates: Vec<(ColliderHandle, DVec3, DVec3)>,
+    /// Colliders near the cloth this substep.
+    candidates: Vec<Candidate>,
+    /// Per (particle chunk, candidate): what the chunk did to the candidate's body.
+    sums: Vec<Exchange>,
     pub stats: ContactStats,
+}
+
+/// A collider near the cloth, with its pose and motion this substep.
+struct Candidate {
+    handle: ColliderHandle,
+    body: Option<RigidBodyHandle>,
+    /// World pose, and its box grown by the thickness.
+    pose: Pose,
+    lo: DVec3,
+    hi: DVec3,
+    /// Rigid motion: velocity of the centre of mass, angular velocity, centre of mass.
+    lin: DVec3,
+    ang: DVec3,
+    com: DVec3,
+    dynamic: bool,
+    /// The body's mass (dynamic bodies; 0 otherwise).
+    mass: f64,
+    mu_s: f64,
+    mu_k: f64,
+}
+
+impl Candidate {
+    fn velocity_at(&self, p: DVec3) -> DVec3 {
+        self.lin + self.ang.cross(p - self.com)
+    }
 }
 
 fn v3(v: [f64; 3]) -> Vec3 {
     DVec3::from(v).as_vec3()
 }
 
+/// A keyframe's pose.
+fn pose_of(k: &Keyframe) -> Pose {
+    Pose::new(v3(k.position), v3(k.rotation))
+}
+
+/// The pose on a keyframed path at time `t`: linear in position, spherical in rotation, held
+/// before the first and after the last keyframe.
+pub fn path_pose(path: &[Keyframe], t: f64) -> Pose {
+    let next = path.partition_point(|k| k.time <= t);
+    match (next.checked_sub(1).map(|i| &path[i]), path.get(next)) {
+        (Some(a), Some(b)) => {
+            let s = ((t - a.time) / (b.time - a.time)) as f32;
+            pose_of(a).lerp(&pose_of(b), s)
+        }
+        (Some(a), None) => pose_of(a),
+        (None, Some(b)) => pose_of(b),
+        (None, None) => Pose::IDENTITY,
+    }
+}
 /// The rapier collider of a shape, or why the shape is unusable.
 pub fn collider_of(shape: &Shape) -> Result<ColliderBuilder, String> {
     Ok(match shape {
@@ -130,16 +195,24 @@ impl Props {
         let mut physics = PhysicsWorld::new();
         physics.gravity = gravity.as_vec3();
         let mut handles = Vec::with_capacity(bodies.len());
+        let mut paths = Vec::new();
         for (i, b) in bodies.iter().enumerate() {
+            let (position, rotation) = match b.path.first() {
+                Some(k) => (k.position, k.rotation),
+                None => (b.position, b.rotation),
+            };
             let builder = match b.kind {
                 BodyKind::Fixed => RigidBodyBuilder::fixed(),
                 BodyKind::Dynamic => RigidBodyBuilder::dynamic(),
                 BodyKind::Kinematic => RigidBodyBuilder::kinematic_velocity_based(),
+                BodyKind::KinematicPosition => RigidBodyBuilder::kinematic_position_based(),
             }
-            .translation(v3(b.position))
-            .rotation(v3(b.rotation))
+            .translation(v3(position))
+            .rotation(v3(rotation))
             .linvel(v3(b.velocity))
-            .angvel(v3(b.angular_velocity));
+            .angvel(v3(b.angular_velocity))
+            .linear_damping(b.linear_damping as f32)
+            .angular_damping(b.angular_damping as f32);
             let body = physics.bodies.insert(builder);
             let mut co = collider_of(&b.shape)
                 .map_err(|e| format!("bodies[{i}].shape: {e}"))?
@@ -155,22 +228,110 @@ impl Props {
                 .insert_with_parent(co, body, &mut physics.bodies);
             world.spawn((RigidProp { body, collider },));
             handles.push(body);
+            if !b.path.is_empty() {
+                paths.push((body, b.path.clone()));
+            }
         }
         let moving = bodies.iter().any(|b| b.kind != BodyKind::Fixed);
         let dynamic = bodies.iter().any(|b| b.kind == BodyKind::Dynamic);
         Ok((
             Props {
                 physics,
-                contact,
                 moving,
                 dynamic,
-                attached: Vec::new(),
-                prev: Vec::new(),
-                candidates: Vec::new(),
-                stats: ContactStats::default(),
+                paths,
+                driven: Vec::new(),
+                time: 0.0,
+                substep: 0,
+                substeps: 1,
+                stage: ContactStage::new(contact),
             },
             handles,
         ))
+    }
+
+    /// After a gather: the attached particles' packed indices.
+    pub fn gather(&mut self, world: &World, packed: &Packed) {
+        self.stage.gather(world, packed);
+    }
+
+    /// Entities of attached particles whose body no longer exists.
+    pub fn dangling(&self, world: &World) -> Option<Entity> {
+        self.stage.dangling(world, &self.physics.bodies)
+    }
+
+    /// Call before each substep's integrate: remembers where particles start.
+    pub fn begin_substep(&mut self, packed: &Packed) {
+        self.stage.begin_substep(packed);
+    }
+
+    /// The frame's statistics start again; position-driven bodies given a target through the
+    /// API (`set_next_kinematic_position`) reach it at the frame's end, in even substeps.
+    pub fn begin_frame(&mut self, substeps: u32) {
+        self.stage.begin_frame();
+        (self.substep, self.substeps) = (0, substeps.max(1));
+        self.driven.clear();
+        for (handle, b) in self.physics.bodies.iter() {
+            let by_path = self.paths.iter().any(|(p, _)| *p == handle);
+            if b.body_type() == RigidBodyType::KinematicPositionBased && !by_path {
+                self.driven
+                    .push((handle, *b.position(), *b.next_position()));
+            }
+        }
+    }
+
+    /// Steps 1–3 of the module docs, after the integrate stage of one substep.
+    pub fn substep(&mut self, packed: &mut Packed, h: f64) {
+        self.substep += 1;
+        self.time += h;
+        if self.moving {
+            let bodies = &mut self.physics.bodies;
+            for (handle, path) in &self.paths {
+                if let Some(b) = bodies.get_mut(*handle) {
+                    b.set_next_kinematic_position(path_pose(path, self.time));
+                }
+            }
+            let s = self.substep as f32 / self.substeps as f32;
+            for (handle, start, target) in &self.driven {
+                if let Some(b) = bodies.get_mut(*handle) {
+                    b.set_next_kinematic_position(start.lerp(target, s.min(1.0)));
+                }
+            }
+            self.physics.integration_parameters.dt = h as f32;
+            self.physics.step();
+        }
+        let (bodies, colliders) = (&mut self.physics.bodies, &self.physics.colliders);
+        self.stage.substep(packed, bodies, colliders, 0.0, h);
+    }
+
+    pub fn stats(&self) -> &ContactStats {
+        &self.stage.stats
+    }
+
+    pub fn contact(&self) -> &ContactDef {
+        &self.stage.contact
+    }
+
+    pub fn bodies(&self) -> &RigidBodySet {
+        &self.physics.bodies
+    }
+
+    pub fn colliders(&self) -> &ColliderSet {
+        &self.physics.colliders
+    }
+}
+
+impl ContactStage {
+    pub fn new(contact: ContactDef) -> Self {
+        Self {
+            contact,
+            attached: Vec::new(),
+            held: Vec::new(),
+            prev: Vec::new(),
+            candidates: Vec::new(),
+            sums: Vec::new(),
+            stats: ContactStats::default(),
+        }
     }
 
     /// After a gather: the attached particles' packed indices.
@@ -182,46 +343,56 @@ impl Props {
             }
         }
         self.attached.sort_by_key(|(i, _)| *i);
+        self.held.clear();
+        self.held.resize(packed.x.len(), false);
+        for &(i, _) in &self.attached {
+            self.held[i] = true;
+        }
     }
 
-    /// Entities of attached particles whose body no longer exists.
-    pub fn dangling(&self, world: &World) -> Option<Entity> {
+    /// An attached particle whose body is not in `bodies`.
+    pub fn dangling(&self, world: &World, bodies: &RigidBodySet) -> Option<Entity> {
         world
             .query::<(Entity, &Attachment)>()
             .iter()
-            .find(|(_, a)| !self.physics.bodies.contains(a.body))
+            .find(|(_, a)| !bodies.contains(a.body))
             .map(|(e, _)| e)
     }
 
-    /// Call before each substep's integrate: remembers where particles start.
     pub fn begin_substep(&mut self, packed: &Packed) {
         self.prev.clear();
         self.prev.extend_from_slice(&packed.x);
     }
 
-    /// The frame's statistics start again.
     pub fn begin_frame(&mut self) {
         self.stats = ContactStats::default();
     }
 
-    /// Steps 1–3 of the module docs, after the integrate stage of one substep.
-    pub fn substep(&mut self, packed: &mut Packed, h: f64) {
-        if self.moving {
-            self.physics.integration_parameters.dt = h as f32;
-            self.physics.step();
-        }
-        self.attach(packed);
-        self.contacts(packed);
+    /// Attachments then contacts of a substep of `h` against `bodies` and `colliders`, posed
+    /// `ahead` seconds after their stored poses at their current velocities (0 when rapier
+    /// already stepped them).
+    pub fn substep(
+        &mut self,
+        packed: &mut Packed,
+        bodies: &mut RigidBodySet,
+        colliders: &ColliderSet,
+        ahead: f64,
+        h: f64,
+    ) {
+        self.attach(packed, bodies, ahead);
+        self.contacts(packed, bodies, colliders, ahead, h);
     }
 
-    fn attach(&mut self, packed: &mut Packed) {
-        let bodies = &mut self.physics.bodies;
+    fn attach(&mut self, packed: &mut Packed, bodies: &mut RigidBodySet, ahead: f64) {
         for &(i, a) in &self.attached {
             let Some(body) = bodies.get_mut(a.body) else {
                 continue;
             };
-            let target = body.position().transform_point(a.local);
-            let vb = body.velocity_at_point(target).as_dvec3();
+            let pose = posed(body, ahead);
+            let target = pose.transform_point(a.local);
+            let com = pose.transform_point(body.local_center_of_mass()).as_dvec3();
+            let vb =
+                body.linvel().as_dvec3() + body.angvel().as_dvec3().cross(target.as_dvec3() - com);
             let m = packed.mass[i];
             if m.is_finite() && body.is_dynamic() {
                 let j = m * (vb - packed.v[i]);
@@ -233,7 +404,14 @@ impl Props {
         }
     }
 
-    fn contacts(&mut self, packed: &mut Packed) {
+    fn contacts(
+        &mut self,
+        packed: &mut Packed,
+        bodies: &mut RigidBodySet,
+        colliders: &ColliderSet,
+        ahead: f64,
+        h: f64,
+    ) {
         let c = self.contact;
         let margin = c.thickness as f32;
         // Broad phase, coarse: colliders whose box meets the box of every particle path.
@@ -241,110 +419,207 @@ impl Props {
             return;
         };
         self.candidates.clear();
-        for (handle, co) in self.physics.colliders.iter() {
-            let b = co.compute_aabb().loosened(margin);
-            if b.mins.cmple(cloth_box.1).all() && b.maxs.cmpge(cloth_box.0).all() {
-                self.candidates
-                    .push((handle, b.mins.as_dvec3(), b.maxs.as_dvec3()));
+        for (handle, co) in colliders.iter() {
+            if !co.is_enabled() {
+                continue;
             }
+            let body = co.parent().and_then(|p| bodies.get(p).map(|b| (p, b)));
+            let pose = match (body, co.position_wrt_parent()) {
+                (Some((_, b)), Some(rel)) if ahead > 0.0 && b.is_moving() => posed(b, ahead) * rel,
+                _ => *co.position(),
+            };
+            let aabb = co.shape().compute_aabb(&pose).loosened(margin);
+            if !(aabb.mins.cmple(cloth_box.1).all() && aabb.maxs.cmpge(cloth_box.0).all()) {
+                continue;
+            }
+            let (lin, ang, com, dynamic, mass) = body.map_or(
+                (DVec3::ZERO, DVec3::ZERO, DVec3::ZERO, false, 0.0),
+                |(_, b)| {
+                    let com = posed(b, ahead).transform_point(b.local_center_of_mass());
+                    (
+                        b.linvel().as_dvec3(),
+                        b.angvel().as_dvec3(),
+                        com.as_dvec3(),
+                        b.is_dynamic(),
+                        b.mass() as f64,
+                    )
+                },
+            );
+            let mu_s = 0.5 * (c.friction + co.friction() as f64);
+            self.candidates.push(Candidate {
+                handle,
+                body: body.map(|(p, _)| p),
+                pose,
+                lo: aabb.mins.as_dvec3(),
+                hi: aabb.maxs.as_dvec3(),
+                lin,
+                ang,
+                com,
+                dynamic,
+                mass,
+                mu_s,
+                mu_k: (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s),
+            });
         }
-        if self.candidates.is_empty() {
+        let nc = self.candidates.len();
+        if nc == 0 {
             return;
         }
-        let (colliders, bodies) = (&self.physics.colliders, &mut self.physics.bodies);
-        for &(handle, lo, hi) in &self.candidates {
-            let co = &colliders[handle];
-            let mu_s = 0.5 * (c.friction + co.friction() as f64);
-            let mu_k = (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s);
-            let body = co.parent().and_then(|p| bodies.get(p));
-            let dynamic = body.is_some_and(|b| b.is_dynamic());
-            let com = body.map_or(Vec3::ZERO, |b| b.center_of_mass()).as_dvec3();
-            let prev = &self.prev;
-            let Packed {
-                x,
-                v,
-                inv_mass,
-                mass,
-                ..
-            } = packed;
-            let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
-            // Particles in fixed chunks, each summing its impulses on the body, then the sums in
-            // chunk order: the same result whatever the thread count.
-            let sums: Vec<Exchange> = x
-                .par_chunks_mut(CHUNK)
-                .zip(v.par_chunks_mut(CHUNK))
-                .enumerate()
-                .map(|(k, (xs, vs))| {
-                    let mut sum = Exchange::default();
-                    for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
-                        let i = k * CHUNK + j;
-                        if inv_mass[i] == 0.0 {
-                            continue;
-                        }
+        // Colliders that cannot be pushed first: a particle they touch is supported when a
+        // dynamic body then presses on it.
+        self.candidates.sort_by_key(|c| c.dynamic);
+        let chunks = packed.x.len().div_ceil(CHUNK);
+        self.sums.clear();
+        self.sums.resize(chunks * nc, Exchange::default());
+        let (candidates, prev, held) = (&self.candidates, &self.prev, &self.held);
+        let Packed {
+            x,
+            v,
+            inv_mass,
+            mass,
+            ..
+        } = packed;
+        let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
+        // One pass over particles in fixed chunks; each chunk sums its impulses per collider,
+        // then the sums are added in chunk order: the same result whatever the thread count.
+        x.par_chunks_mut(CHUNK)
+            .zip(v.par_chunks_mut(CHUNK))
+            .zip(self.sums.par_chunks_mut(nc))
+            .enumerate()
+            .for_each(|(k, ((xs, vs), sums))| {
+                for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
+                    let i = k * CHUNK + j;
+                    if inv_mass[i] == 0.0 || held[i] {
+                        continue;
+                    }
+                    let mut supported = false;
+                    for (cand, sum) in candidates.iter().zip(sums.iter_mut()) {
                         let (x0, x1) = (prev[i], *xi);
                         // Broad phase, fine: this particle's path against this collider's box.
-                        if x0.min(x1).cmpgt(hi).any() || x0.max(x1).cmplt(lo).any() {
+                        if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
                             continue;
                         }
-                        let Some(hit) = surface(co, x0, x1, c.thickness) else {
+                        let shape = colliders[cand.handle].shape();
+                        let Some(hit) = surface(shape, &cand.pose, x0, x1, c.thickness) else {
                             continue;
                         };
                         sum.contacts += 1;
                         sum.max_depth = sum.max_depth.max(hit.depth);
                         sum.swept += usize::from(hit.swept);
-                        *xi = hit.point + hit.normal * c.thickness;
-                        let vb = body.map_or(DVec3::ZERO, |b| {
-                            b.velocity_at_point(hit.point.as_vec3()).as_dvec3()
-                        });
-                        let old = *vi;
-                        let rel = old - vb;
-                        let vn = rel.dot(hit.normal);
-                        if vn >= 0.0 {
+                        if cand.dynamic && supported {
+                            support(&hit, x1, *vi, &c, cand, h, sum);
                             continue;
                         }
-                        let dvn = -(1.0 + c.restitution) * vn;
-                        let vt = rel - vn * hit.normal;
-                        let speed = vt.length();
-                        let vt = if speed <= mu_s * dvn {
-                            DVec3::ZERO
-                        } else {
-                            vt * (1.0 - mu_k * dvn / speed).max(0.0)
+                        supported |= !cand.dynamic;
+                        *xi = hit.point + hit.normal * c.thickness;
+                        let vb = cand.velocity_at(hit.point);
+                        let old = *vi;
+                        let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
+                            continue;
                         };
-                        *vi = vb + (vn + dvn) * hit.normal + vt;
-                        if dynamic {
+                        *vi = vb + new;
+                        if cand.dynamic {
                             // The body gets −J at the contact point: force and torque.
                             let j = mass[i] * (*vi - old);
                             sum.impulse -= j;
-                            sum.torque -= (hit.point - com).cross(j);
+                            sum.torque -= (hit.point - cand.com).cross(j);
                         }
                     }
-                    sum
-                })
-                .collect();
+                }
+            });
+        for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
-            for s in &sums {
+            for s in self.sums.iter().skip(ci).step_by(nc) {
                 total.contacts += s.contacts;
                 total.swept += s.swept;
                 total.max_depth = total.max_depth.max(s.max_depth);
                 total.impulse += s.impulse;
                 total.torque += s.torque;
+                total.support += s.support;
+                total.support_torque += s.support_torque;
+                total.supports += s.supports;
             }
             self.stats.contacts += total.contacts;
             self.stats.swept += total.swept;
             self.stats.max_depth = self.stats.max_depth.max(total.max_depth);
-            if dynamic && total.contacts > 0 {
-                if let Some(b) = co.parent().and_then(|p| bodies.get_mut(p)) {
-                    b.apply_impulse(total.impulse.as_vec3(), true);
-                    b.apply_torque_impulse(total.torque.as_vec3(), true);
+            if cand.dynamic && total.contacts > 0 {
+                // Supported contacts each ask for the impulse that would stop the body alone:
+                // the body gets their mean (one body, many contacts, one answer).
+                let k = total.supports.max(1) as f64;
+                let impulse = total.impulse + total.support / k;
+                let torque = total.torque + total.support_torque / k;
+                if let Some(b) = cand.body.and_then(|p| bodies.get_mut(p)) {
+                    b.apply_impulse(impulse.as_vec3(), true);
+                    b.apply_torque_impulse(torque.as_vec3(), true);
                 }
-                self.stats.impulse_on_bodies += total.impulse;
+                self.stats.impulse_on_bodies += impulse;
             }
         }
     }
+}
 
-    pub fn bodies(&self) -> &RigidBodySet {
-        &self.physics.bodies
+/// A dynamic body pressing on a particle that a fixed or kinematic collider holds up (a box on
+/// a tablecloth on a table): the particle cannot give way, so the body is stopped instead. The
+/// impulse asked for ends the body's approach, closes a fifth of the shell's overlap per
+/// substep, and carries Coulomb friction against the particle's sliding; the particle keeps
+/// its state (its reaction goes into the collider holding it).
+fn support(
+    hit: &Hit,
+    x: DVec3,
+    v: DVec3,
+    c: &ContactDef,
+    cand: &Candidate,
+    h: f64,
+    sum: &mut Exchange,
+) {
+    let n = hit.normal;
+    let rel = v - cand.velocity_at(hit.point);
+    let vn = rel.dot(n);
+    let overlap = (c.thickness - (x - hit.point).dot(n)).max(0.0);
+    let approach = -vn + 0.2 * overlap / h;
+    if approach <= 0.0 {
+        return;
     }
+    let jn = cand.mass * approach;
+    let vt = rel - vn * n;
+    let speed = vt.length();
+    let jt = if cand.mass * speed <= cand.mu_s * jn {
+        cand.mass * vt
+    } else {
+        vt * (cand.mu_k * jn / speed)
+    };
+    let j = -jn * n + jt;
+    sum.supports += 1;
+    sum.support += j;
+    sum.support_torque += (hit.point - cand.com).cross(j);
+}
+
+/// A body's pose `ahead` seconds on at its current velocity (its pose when `ahead` is 0).
+fn posed(body: &RigidBody, ahead: f64) -> Pose {
+    if ahead > 0.0 && body.is_moving() {
+        body.predict_position_using_velocity(ahead as f32)
+    } else {
+        *body.position()
+    }
+}
+
+/// The velocity relative to the collider after the contact: the approach along `normal`
+/// reversed by the restitution, the tangential part held by static friction or slowed by
+/// kinetic friction. None when the particle is already leaving.
+fn respond(rel: DVec3, normal: DVec3, c: &ContactDef, cand: &Candidate) -> Option<DVec3> {
+    let vn = rel.dot(normal);
+    if vn >= 0.0 {
+        return None;
+    }
+    let dvn = -(1.0 + c.restitution) * vn;
+    let vt = rel - vn * normal;
+    let speed = vt.length();
+    let vt = if speed <= cand.mu_s * dvn {
+        DVec3::ZERO
+    } else {
+        vt * (1.0 - cand.mu_k * dvn / speed).max(0.0)
+    };
+    Some((vn + dvn) * normal + vt)
 }
 
 /// Particles per parallel task of the contact stage.
@@ -359,6 +634,10 @@ struct Exchange {
     /// Impulse and angular impulse (about the centre of mass) on the body.
     impulse: DVec3,
     torque: DVec3,
+    /// Supported contacts: their count and the sums of the impulses each asks for.
+    supports: usize,
+    support: DVec3,
+    support_torque: DVec3,
 }
 
 /// Where a particle meets a collider this substep.
@@ -375,8 +654,13 @@ struct Hit {
 
 /// The contact of a particle that moved from `x0` to `x1`: its path crossed the surface (ray
 /// cast), or it ends within `thickness` of it or inside (projection).
-fn surface(co: &Collider, x0: DVec3, x1: DVec3, thickness: f64) -> Option<Hit> {
-    let (shape, pose) = (co.shape(), co.position());
+fn surface(
+    shape: &dyn ParryShape,
+    pose: &Pose,
+    x0: DVec3,
+    x1: DVec3,
+    thickness: f64,
+) -> Option<Hit> {
     let d = x1 - x0;
     if d.length() > thickness {
         // Fast enough to skip a shell: cast the path, from outside only.

@@ -57,6 +57,8 @@ pub enum SimError {
     UnknownBackend(String),
     #[error(transparent)]
     Gpu(#[from] GpuError),
+    #[error("this simulation's scene has bodies of its own; step it with `step`, not `step_with`")]
+    OwnBodies,
     #[error("particle {particle:?} is attached to a body that no longer exists")]
     DanglingAttachment { particle: Entity },
     #[error("time step must be finite and > 0, got {0}")]

@@ -1,17 +1,20 @@
 //! The `Simulation` facade: a World, its packed buffers and the schedule that steps them.
 
 use std::path::Path;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use hecs::World;
 
 use crate::backend::Backend;
 use crate::buffers::Packed;
-use crate::contacts::Props;
+use rapier3d::prelude::{ColliderSet, RigidBodySet};
+
+use crate::contacts::{ContactStage, ContactStats, Props};
 use crate::error::{Error, SimError};
 use crate::integrate::{Integrator, Solver};
 use crate::metrics;
+use crate::scene::props::ContactDef;
 use crate::scene::Scene;
 use crate::schedule::StepStats;
 use crate::step_control::{self, StepChoice};
@@ -94,6 +97,48 @@ pub struct Simulation {
     gpu: Option<crate::gpu::GpuSolver>,
     /// Rigid props and the contact stage; None for a scene without bodies.
     props: Option<Props>,
+    /// The contact stage against the caller's rapier sets ([`Simulation::step_with`]).
+    user_stage: Option<ContactStage>,
+    /// The cloth's contact material for [`Simulation::step_with`].
+    contact: ContactDef,
+}
+
+/// The rigid side a frame couples with: the scene's own rapier world, or the caller's sets.
+enum Coupling<'a> {
+    Own(&'a mut Props),
+    User {
+        stage: &'a mut ContactStage,
+        bodies: &'a mut RigidBodySet,
+        colliders: &'a ColliderSet,
+    },
+}
+
+impl Coupling<'_> {
+    fn begin_frame(&mut self, substeps: u32) {
+        match self {
+            Coupling::Own(p) => p.begin_frame(substeps),
+            Coupling::User { stage, .. } => stage.begin_frame(),
+        }
+    }
+
+    fn begin_substep(&mut self, packed: &Packed) {
+        match self {
+            Coupling::Own(p) => p.begin_substep(packed),
+            Coupling::User { stage, .. } => stage.begin_substep(packed),
+        }
+    }
+
+    /// After the integrate stage of substep `k` (1-based).
+    fn substep(&mut self, packed: &mut Packed, h: f64, k: u32) {
+        match self {
+            Coupling::Own(p) => p.substep(packed, h),
+            Coupling::User {
+                stage,
+                bodies,
+                colliders,
+            } => stage.substep(packed, bodies, colliders, k as f64 * h, h),
+        }
+    }
 }
 
 /// The GPU solver a config asks for: `None` runs on the CPU.
@@ -180,6 +225,8 @@ impl Simulation {
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
             props,
+            user_stage: None,
+            contact: ContactDef::default(),
         };
         #[cfg(not(feature = "gpu"))]
         refuse_gpu(&config)?;
@@ -199,12 +246,50 @@ impl Simulation {
 
     /// Advances one frame of `dt`. Stages, in order:
     /// 1. gather: World → buffers, only if the World may have changed (see [`Self::world_mut`]);
-    /// 2. integrate: `substeps` substeps on the buffers (no allocation);
+    /// 2. integrate: `substeps` substeps on the buffers (no allocation), each followed by the
+    ///    contact stage when the scene has bodies;
     /// 3. scatter: buffers → World, after a check that the state is finite.
     ///
     /// A scene without colliders has no contact stage. On a non-finite state the World keeps
     /// the last finite frame and the error names the first bad particle.
     pub fn step(&mut self) -> Result<&StepStats, SimError> {
+        self.step_coupled(None)
+    }
+
+    /// As [`Self::step`], with the caller's own rapier sets as the rigid side, the way rapier's
+    /// own step takes them: particles collide with `colliders` and push the dynamic bodies of
+    /// `bodies`; particles with an [`crate::contacts::Attachment`] follow their body.
+    ///
+    /// The engine does not step these sets: the caller's loop steps rapier once per frame,
+    /// before or after this call. Within the frame a moving body is taken at its current
+    /// velocity (its pose `k·h` ahead at substep `k`), which is what rapier's step will do.
+    /// A simulation whose scene has bodies of its own refuses this (use [`Self::step`]).
+    pub fn step_with(
+        &mut self,
+        bodies: &mut RigidBodySet,
+        colliders: &ColliderSet,
+    ) -> Result<&StepStats, SimError> {
+        if self.props.is_some() {
+            return Err(SimError::OwnBodies);
+        }
+        if self.dirty {
+            self.gather()?;
+        }
+        let stage = self.user_stage.get_or_insert_with(|| {
+            let mut s = ContactStage::new(self.contact);
+            s.gather(&self.world, &self.packed);
+            s
+        });
+        if let Some(particle) = stage.dangling(&self.world, bodies) {
+            return Err(SimError::DanglingAttachment { particle });
+        }
+        self.step_coupled(Some((bodies, colliders)))
+    }
+
+    fn step_coupled(
+        &mut self,
+        user: Option<(&mut RigidBodySet, &ColliderSet)>,
+    ) -> Result<&StepStats, SimError> {
         let t0 = Instant::now();
         let gathered = self.dirty;
         if self.dirty {
@@ -212,24 +297,36 @@ impl Simulation {
         }
         let t1 = Instant::now();
         let h = self.config.h();
+        let substeps = self.config.substeps;
+        let mut coupling = match (user, self.props.as_mut(), self.user_stage.as_mut()) {
+            (Some((bodies, colliders)), _, Some(stage)) => Some(Coupling::User {
+                stage,
+                bodies,
+                colliders,
+            }),
+            (None, Some(p), _) => Some(Coupling::Own(p)),
+            _ => None,
+        };
+        let mut contacts = Duration::ZERO;
+        if let Some(c) = coupling.as_mut() {
+            c.begin_frame(substeps);
+        }
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {
-            let mut contacts = std::time::Duration::ZERO;
-            match &mut self.props {
+            match coupling.as_mut() {
                 None => {
                     // Every substep in one submit; the state comes back once, for the scatter.
-                    gpu.run(self.config.substeps)?;
+                    gpu.run(substeps)?;
                     gpu.read_back(&mut self.packed)?;
                 }
-                Some(p) => {
+                Some(c) => {
                     // Contacts run on the CPU: the state goes back and forth every substep.
-                    p.begin_frame();
-                    for _ in 0..self.config.substeps {
-                        p.begin_substep(&self.packed);
+                    for k in 1..=substeps {
+                        c.begin_substep(&self.packed);
                         gpu.run(1)?;
                         gpu.read_back(&mut self.packed)?;
                         let t = Instant::now();
-                        p.substep(&mut self.packed, h);
+                        c.substep(&mut self.packed, h, k);
                         contacts += t.elapsed();
                         gpu.write_state(&self.packed);
                     }
@@ -237,22 +334,17 @@ impl Simulation {
             }
             return self.finish_frame(t0, t1, gathered, contacts);
         }
-        let (solver, packed, substeps) = (&mut self.solver, &mut self.packed, self.config.substeps);
-        let mut props = self.props.as_mut();
-        let mut contacts = std::time::Duration::ZERO;
+        let (solver, packed) = (&mut self.solver, &mut self.packed);
         let contacts_time = &mut contacts;
-        if let Some(p) = props.as_mut() {
-            p.begin_frame();
-        }
         let mut integrate = move || {
-            (0..substeps).try_for_each(|_| {
-                let Some(p) = props.as_mut() else {
+            (1..=substeps).try_for_each(|k| {
+                let Some(c) = coupling.as_mut() else {
                     return solver.substep(packed, h);
                 };
-                p.begin_substep(packed);
+                c.begin_substep(packed);
                 solver.substep(packed, h)?;
                 let t = Instant::now();
-                p.substep(packed, h);
+                c.substep(packed, h, k);
                 *contacts_time += t.elapsed();
                 Ok(())
             })
@@ -273,7 +365,7 @@ impl Simulation {
         t0: Instant,
         t1: Instant,
         gathered: bool,
-        contacts: std::time::Duration,
+        contacts: Duration,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.steps += 1;
@@ -309,6 +401,9 @@ impl Simulation {
                 return Err(SimError::DanglingAttachment { particle });
             }
             p.gather(&self.world, &self.packed);
+        }
+        if let Some(s) = &mut self.user_stage {
+            s.gather(&self.world, &self.packed);
         }
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {
@@ -371,6 +466,25 @@ impl Simulation {
     /// Mutable props: move kinematic bodies, push dynamic ones, add colliders.
     pub fn props_mut(&mut self) -> Option<&mut Props> {
         self.props.as_mut()
+    }
+
+    /// What the contact stage did in the last frame (None when the simulation has never
+    /// coupled with bodies).
+    pub fn contact_stats(&self) -> Option<&ContactStats> {
+        match (&self.props, &self.user_stage) {
+            (Some(p), _) => Some(p.stats()),
+            (None, Some(s)) => Some(&s.stats),
+            (None, None) => None,
+        }
+    }
+
+    /// The cloth's contact material against the caller's sets ([`Self::step_with`]); a scene's
+    /// own bodies use the scene's `contact`.
+    pub fn set_contact_material(&mut self, contact: ContactDef) {
+        self.contact = contact;
+        if let Some(s) = &mut self.user_stage {
+            s.contact = contact;
+        }
     }
 
     /// The back end the integrate stage runs on: `Cpu` or `Gpu` (never `Auto`).

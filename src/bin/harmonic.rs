@@ -382,9 +382,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         println!(
             "props: {} bod(ies), contact thickness {} m, friction {} static / {} kinetic; rapier steps {}",
             p.bodies().len(),
-            p.contact.thickness,
-            p.contact.friction,
-            p.contact.kinetic_friction,
+            p.contact().thickness,
+            p.contact().friction,
+            p.contact().kinetic_friction,
             if p.moving { "every substep" } else { "never (all bodies fixed)" }
         );
     }
@@ -401,9 +401,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
         if let Some(p) = sim.props() {
-            contacts += p.stats.contacts;
-            max_depth = max_depth.max(p.stats.max_depth);
-            swept += p.stats.swept;
+            contacts += p.stats().contacts;
+            max_depth = max_depth.max(p.stats().max_depth);
+            swept += p.stats().swept;
         }
         max_strain = max_strain.max(harmonic::metrics::max_strain(sim.packed()));
         if let Some(w) = traj.as_mut() {

@@ -14,6 +14,22 @@ pub enum BodyKind {
     Dynamic,
     /// Moves at its `velocity` and `angular_velocity` whatever pushes it (a character).
     Kinematic,
+    /// Goes where it is put, whatever pushes it: along its `path`, or to the pose given through
+    /// the API (`set_next_kinematic_position`), reached at the end of the frame.
+    KinematicPosition,
+}
+
+/// A pose of a position-driven body at a time; poses between keyframes are interpolated
+/// (position linearly, rotation spherically) and the last one is held.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Keyframe {
+    /// Simulated time (s).
+    pub time: f64,
+    pub position: V3,
+    /// Axis-angle (axis times angle in radians).
+    #[serde(default)]
+    pub rotation: V3,
 }
 
 /// A collider shape, in the body's frame. Lengths in metres.
@@ -77,6 +93,14 @@ pub struct BodyDef {
     /// Restitution against other bodies.
     #[serde(default)]
     pub restitution: f64,
+    /// Dynamic only: rapier's velocity damping (1/s), the drag of the air around the body.
+    #[serde(default)]
+    pub linear_damping: f64,
+    #[serde(default)]
+    pub angular_damping: f64,
+    /// `KinematicPosition` only: keyframes in increasing time; the body starts at the first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub path: Vec<Keyframe>,
 }
 
 fn default_body_friction() -> f64 {

@@ -196,6 +196,33 @@ impl Scene {
             }
             is.non_negative(format!("{at}.friction"), b.friction);
             is.non_negative(format!("{at}.restitution"), b.restitution);
+            is.non_negative(format!("{at}.linear_damping"), b.linear_damping);
+            is.non_negative(format!("{at}.angular_damping"), b.angular_damping);
+            if !b.path.is_empty() && b.kind != super::props::BodyKind::KinematicPosition {
+                is.push(
+                    format!("{at}.path"),
+                    format!(
+                        "only a KinematicPosition body follows a path, this one is {:?}",
+                        b.kind
+                    ),
+                );
+            }
+            let mut last = f64::NEG_INFINITY;
+            for (k, key) in b.path.iter().enumerate() {
+                let kt = format!("{at}.path[{k}]");
+                is.finite(format!("{kt}.position"), key.position);
+                is.finite(format!("{kt}.rotation"), key.rotation);
+                if !(key.time.is_finite() && key.time >= 0.0 && key.time > last) {
+                    is.push(
+                        format!("{kt}.time"),
+                        format!(
+                            "must be finite, ≥ 0 and after the keyframe before, got {}",
+                            key.time
+                        ),
+                    );
+                }
+                last = key.time;
+            }
             let sh = format!("{at}.shape");
             match &b.shape {
                 Shape::Ball { radius } => is.positive(format!("{sh}.radius"), *radius),
