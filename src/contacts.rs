@@ -21,7 +21,7 @@ use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
 use rapier3d::parry::shape::Shape as ParryShape;
 use rapier3d::prelude::{
-    ColliderBuilder, ColliderHandle, ColliderSet, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
+    ColliderBuilder, ColliderHandle, ColliderSet, SharedShape, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
     RigidBodyHandle, RigidBodySet, RigidBodyType,
 };
 use rayon::prelude::*;
@@ -96,12 +96,15 @@ pub struct ContactStage {
 
 /// A collider near the cloth, with its pose and motion this substep.
 struct Candidate {
-    handle: ColliderHandle,
+    shape: SharedShape,
     body: Option<RigidBodyHandle>,
     /// World pose, and its box grown by the thickness.
     pose: Pose,
     lo: DVec3,
     hi: DVec3,
+    /// Bounding sphere grown by the thickness: centre and radius.
+    centre: DVec3,
+    reach: f64,
     /// Rigid motion: velocity of the centre of mass, angular velocity, centre of mass.
     lin: DVec3,
     ang: DVec3,
@@ -419,7 +422,7 @@ impl ContactStage {
             return;
         };
         self.candidates.clear();
-        for (handle, co) in colliders.iter() {
+        for (_, co) in colliders.iter() {
             if !co.is_enabled() {
                 continue;
             }
@@ -446,8 +449,11 @@ impl ContactStage {
                 },
             );
             let mu_s = 0.5 * (c.friction + co.friction() as f64);
+            let sphere = co.shape().compute_bounding_sphere(&pose);
             self.candidates.push(Candidate {
-                handle,
+                shape: co.shared_shape().clone(),
+                centre: sphere.center.as_dvec3(),
+                reach: sphere.radius as f64 + c.thickness,
                 body: body.map(|(p, _)| p),
                 pose,
                 lo: aabb.mins.as_dvec3(),
@@ -499,8 +505,15 @@ impl ContactStage {
                         if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
                             continue;
                         }
-                        let shape = colliders[cand.handle].shape();
-                        let Some(hit) = surface(shape, &cand.pose, x0, x1, c.thickness) else {
+                        // And against its bounding sphere: no point of the path comes closer
+                        // to the centre than |x1 − c| − |x1 − x0|.
+                        let step = x1.distance(x0);
+                        if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
+                            continue;
+                        }
+                        let shape = cand.shape.as_ref();
+                        let Some(hit) = surface(shape, &cand.pose, x0, x1, step, c.thickness)
+                        else {
                             continue;
                         };
                         sum.contacts += 1;
@@ -659,10 +672,11 @@ fn surface(
     pose: &Pose,
     x0: DVec3,
     x1: DVec3,
+    step: f64,
     thickness: f64,
 ) -> Option<Hit> {
     let d = x1 - x0;
-    if d.length() > thickness {
+    if step > thickness {
         // Fast enough to skip a shell: cast the path, from outside only.
         let start = shape.project_point(pose, x0.as_vec3(), false);
         if !start.is_inside {
@@ -707,10 +721,18 @@ fn surface(
     })
 }
 
-/// The box around two position sets (f32), or None when empty.
+/// The box around two position sets (f32), or None when empty. In parallel: min and max do
+/// not depend on the order.
 fn bounds(a: &[DVec3], b: &[DVec3]) -> Option<(Vec3, Vec3)> {
-    let mut it = a.iter().chain(b);
-    let first = *it.next()?;
-    let (lo, hi) = it.fold((first, first), |(lo, hi), x| (lo.min(*x), hi.max(*x)));
-    Some((lo.as_vec3(), hi.as_vec3()))
+    let first = *a.first().or(b.first())?;
+    let fold = |xs: &[DVec3]| {
+        xs.par_chunks(CHUNK)
+            .map(|c| {
+                c.iter()
+                    .fold((first, first), |(lo, hi), x| (lo.min(*x), hi.max(*x)))
+            })
+            .reduce(|| (first, first), |p, q| (p.0.min(q.0), p.1.max(q.1)))
+    };
+    let ((la, ha), (lb, hb)) = (fold(a), fold(b));
+    Some((la.min(lb).as_vec3(), ha.max(hb).as_vec3()))
 }
