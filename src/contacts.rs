@@ -21,8 +21,8 @@ use rapier3d::parry::bounding_volume::BoundingVolume;
 use rapier3d::parry::query::Ray;
 use rapier3d::parry::shape::Shape as ParryShape;
 use rapier3d::prelude::{
-    ColliderBuilder, ColliderHandle, ColliderSet, SharedShape, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
-    RigidBodyHandle, RigidBodySet, RigidBodyType,
+    ColliderBuilder, ColliderHandle, ColliderSet, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
+    RigidBodyHandle, RigidBodySet, RigidBodyType, SharedShape,
 };
 use rayon::prelude::*;
 
@@ -75,6 +75,9 @@ pub struct Props {
     substep: u32,
     substeps: u32,
     stage: ContactStage,
+    /// The dynamic body (if any) of each collider given to the device stage, in its order.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
+    device_bodies: Vec<Option<RigidBodyHandle>>,
 }
 
 /// The contact stage's buffers and statistics: attachments, then particles against colliders.
@@ -248,6 +251,7 @@ impl Props {
                 substep: 0,
                 substeps: 1,
                 stage: ContactStage::new(contact),
+                device_bodies: Vec::new(),
             },
             handles,
         ))
@@ -285,6 +289,13 @@ impl Props {
 
     /// Steps 1–3 of the module docs, after the integrate stage of one substep.
     pub fn substep(&mut self, packed: &mut Packed, h: f64) {
+        self.step_bodies(h);
+        let (bodies, colliders) = (&mut self.physics.bodies, &self.physics.colliders);
+        self.stage.substep(packed, bodies, colliders, 0.0, h);
+    }
+
+    /// Step 1: the bodies move by one substep (paths, API targets, then rapier).
+    pub fn step_bodies(&mut self, h: f64) {
         self.substep += 1;
         self.time += h;
         if self.moving {
@@ -303,8 +314,6 @@ impl Props {
             self.physics.integration_parameters.dt = h as f32;
             self.physics.step();
         }
-        let (bodies, colliders) = (&mut self.physics.bodies, &self.physics.colliders);
-        self.stage.substep(packed, bodies, colliders, 0.0, h);
     }
 
     pub fn stats(&self) -> &ContactStats {
@@ -543,29 +552,174 @@ impl ContactStage {
         for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
             for s in self.sums.iter().skip(ci).step_by(nc) {
-                total.contacts += s.contacts;
-                total.swept += s.swept;
-                total.max_depth = total.max_depth.max(s.max_depth);
-                total.impulse += s.impulse;
-                total.torque += s.torque;
-                total.support += s.support;
-                total.support_torque += s.support_torque;
-                total.supports += s.supports;
+                total.add(s);
             }
-            self.stats.contacts += total.contacts;
-            self.stats.swept += total.swept;
-            self.stats.max_depth = self.stats.max_depth.max(total.max_depth);
-            if cand.dynamic && total.contacts > 0 {
-                // Supported contacts each ask for the impulse that would stop the body alone:
-                // the body gets their mean (one body, many contacts, one answer).
-                let k = total.supports.max(1) as f64;
-                let impulse = total.impulse + total.support / k;
-                let torque = total.torque + total.support_torque / k;
-                if let Some(b) = cand.body.and_then(|p| bodies.get_mut(p)) {
-                    b.apply_impulse(impulse.as_vec3(), true);
-                    b.apply_torque_impulse(torque.as_vec3(), true);
+            let body = cand.body.filter(|_| cand.dynamic);
+            apply(&mut self.stats, bodies, body, &total);
+        }
+    }
+}
+
+/// One collider's totals for a substep: into the statistics, and (dynamic body) onto the body.
+/// Supported contacts each ask for the impulse that would stop the body alone: the body gets
+/// their mean (one body, many contacts, one answer).
+fn apply(
+    stats: &mut ContactStats,
+    bodies: &mut RigidBodySet,
+    dynamic: Option<RigidBodyHandle>,
+    total: &Exchange,
+) {
+    stats.contacts += total.contacts;
+    stats.swept += total.swept;
+    stats.max_depth = stats.max_depth.max(total.max_depth);
+    let Some(handle) = dynamic else {
+        return;
+    };
+    if total.contacts == 0 {
+        return;
+    }
+    let k = total.supports.max(1) as f64;
+    let impulse = total.impulse + total.support / k;
+    let torque = total.torque + total.support_torque / k;
+    if let Some(b) = bodies.get_mut(handle) {
+        b.apply_impulse(impulse.as_vec3(), true);
+        b.apply_torque_impulse(torque.as_vec3(), true);
+    }
+    stats.impulse_on_bodies += impulse;
+}
+
+impl Exchange {
+    fn add(&mut self, s: &Exchange) {
+        self.contacts += s.contacts;
+        self.swept += s.swept;
+        self.max_depth = self.max_depth.max(s.max_depth);
+        self.impulse += s.impulse;
+        self.torque += s.torque;
+        self.support += s.support;
+        self.support_torque += s.support_torque;
+        self.supports += s.supports;
+    }
+}
+
+/// The contact stage on the device (`shaders/contacts.wgsl`): which scenes it takes, the
+/// colliders it is given each substep, and the partial sums it hands back.
+#[cfg(feature = "gpu")]
+mod device {
+    use super::*;
+    use crate::gpu::contacts::{Collider, Partial, MAX_COLLIDERS};
+    use rapier3d::parry::shape::ShapeType;
+
+    impl Props {
+        /// The device can run this scene's contacts: balls and cuboids only, at most
+        /// [`MAX_COLLIDERS`], and no attachments. Otherwise the CPU runs them.
+        pub fn device_ready(&self) -> bool {
+            let colliders = &self.physics.colliders;
+            colliders.len() <= MAX_COLLIDERS
+                && self.stage.attached.is_empty()
+                && colliders.iter().all(|(_, c)| {
+                    matches!(c.shape().shape_type(), ShapeType::Ball | ShapeType::Cuboid)
+                })
+        }
+
+        /// Per packed particle, the mass the device stage uses: 0 for pinned or attached.
+        pub fn device_masses(&self, packed: &Packed) -> Vec<f32> {
+            packed
+                .mass
+                .iter()
+                .zip(&packed.inv_mass)
+                .enumerate()
+                .map(|(i, (&m, &w))| {
+                    let held = self.stage.held.get(i).copied().unwrap_or(false);
+                    if w == 0.0 || held {
+                        0.0
+                    } else {
+                        m as f32
+                    }
+                })
+                .collect()
+        }
+
+        /// The colliders as they stand (after [`Self::step_bodies`]), fixed and kinematic first
+        /// as the CPU stage orders them; remembers which body each one pushes.
+        pub fn device_colliders(&mut self, out: &mut Vec<Collider>) {
+            out.clear();
+            self.device_bodies.clear();
+            let c = self.stage.contact;
+            let (bodies, colliders) = (&self.physics.bodies, &self.physics.colliders);
+            for pass in [false, true] {
+                for (_, co) in colliders.iter() {
+                    let body = co.parent().and_then(|p| bodies.get(p).map(|b| (p, b)));
+                    let dynamic = body.is_some_and(|(_, b)| b.is_dynamic());
+                    if dynamic != pass || !co.is_enabled() {
+                        continue;
+                    }
+                    let pose = *co.position();
+                    let (kind, dims) = match co.shape().shape_type() {
+                        ShapeType::Ball => (
+                            0,
+                            [co.shape().as_ball().map_or(0.0, |b| b.radius), 0.0, 0.0],
+                        ),
+                        _ => (
+                            1,
+                            co.shape()
+                                .as_cuboid()
+                                .map_or([0.0; 3], |b| b.half_extents.to_array()),
+                        ),
+                    };
+                    let (lin, ang, com, mass) = body
+                        .map_or((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0), |(_, b)| {
+                            (b.linvel(), b.angvel(), b.center_of_mass(), b.mass())
+                        });
+                    let mu_s = 0.5 * (c.friction + co.friction() as f64);
+                    let mu_k = (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s);
+                    let sphere = co.shape().compute_bounding_sphere(&pose);
+                    let q = pose.rotation;
+                    out.push(Collider {
+                        kind,
+                        dynamic: u32::from(dynamic),
+                        translation: pose.translation.extend(0.0).to_array(),
+                        rotation: [q.x, q.y, q.z, q.w],
+                        dims: [dims[0], dims[1], dims[2], 0.0],
+                        lin: lin.extend(mu_s as f32).to_array(),
+                        ang: ang.extend(mu_k as f32).to_array(),
+                        com: com.extend(mass).to_array(),
+                        sphere: sphere
+                            .center
+                            .extend(sphere.radius + c.thickness as f32)
+                            .to_array(),
+                        ..Collider::default()
+                    });
+                    self.device_bodies
+                        .push(body.filter(|_| dynamic).map(|(p, _)| p));
                 }
-                self.stats.impulse_on_bodies += impulse;
+            }
+        }
+
+        /// One substep's partials (`[workgroup][collider]`), summed in workgroup order, into
+        /// the statistics and onto the dynamic bodies.
+        pub fn apply_device(&mut self, partials: &[Partial], groups: usize, colliders: usize) {
+            for (ci, body) in self.device_bodies.iter().enumerate() {
+                let mut total = Exchange::default();
+                for g in 0..groups {
+                    let p = &partials[g * colliders + ci];
+                    let v = |a: [f32; 4]| DVec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+                    total.add(&Exchange {
+                        contacts: p.impulse[3] as usize,
+                        swept: p.support_torque[3] as usize,
+                        max_depth: p.torque[3] as f64,
+                        impulse: v(p.impulse),
+                        torque: v(p.torque),
+                        supports: p.support[3] as usize,
+                        support: v(p.support),
+                        support_torque: v(p.support_torque),
+                    });
+                }
+                apply(
+                    &mut self.stage.stats,
+                    &mut self.physics.bodies,
+                    *body,
+                    &total,
+                );
             }
         }
     }

@@ -99,6 +99,9 @@ pub struct Simulation {
     props: Option<Props>,
     /// The contact stage against the caller's rapier sets ([`Simulation::step_with`]).
     user_stage: Option<ContactStage>,
+    /// Host scratch for the device contact stage's colliders.
+    #[cfg(feature = "gpu")]
+    device_scratch: Vec<crate::gpu::contacts::Collider>,
     /// The cloth's contact material for [`Simulation::step_with`].
     contact: ContactDef,
 }
@@ -111,6 +114,58 @@ enum Coupling<'a> {
         bodies: &'a mut RigidBodySet,
         colliders: &'a ColliderSet,
     },
+}
+
+/// A frame with springs and contacts on the device. Without dynamic bodies the bodies move
+/// first for every substep (nothing they do depends on the cloth), all substeps go in one
+/// submit and the partials come back once, for the statistics. With dynamic bodies each
+/// substep is its own submit and its partials come back to push the bodies before the next.
+#[cfg(feature = "gpu")]
+fn device_frame(
+    gpu: &mut crate::gpu::GpuSolver,
+    p: &mut Props,
+    scratch: &mut Vec<crate::gpu::contacts::Collider>,
+    substeps: u32,
+    h: f64,
+    host_time: &mut Duration,
+) -> Result<(), SimError> {
+    let Some(dc) = gpu.contacts() else {
+        return Ok(());
+    };
+    let (groups, nc) = dc.shape();
+    let per_slot = groups * nc;
+    if !p.dynamic {
+        let t = Instant::now();
+        for s in 0..substeps {
+            p.step_bodies(h);
+            p.device_colliders(scratch);
+            if let Some(dc) = gpu.contacts() {
+                dc.set_colliders(s, scratch);
+            }
+        }
+        *host_time += t.elapsed();
+        gpu.run(substeps)?;
+        let partials = gpu.read_partials(0, substeps)?;
+        for slot in partials.chunks(per_slot) {
+            p.apply_device(slot, groups, nc);
+        }
+        return Ok(());
+    }
+    for s in 0..substeps {
+        let t = Instant::now();
+        p.step_bodies(h);
+        p.device_colliders(scratch);
+        if let Some(dc) = gpu.contacts() {
+            dc.set_colliders(s, scratch);
+        }
+        *host_time += t.elapsed();
+        gpu.run_slots(s, 1)?;
+        let partials = gpu.read_partials(s, 1)?;
+        let t = Instant::now();
+        p.apply_device(partials, groups, nc);
+        *host_time += t.elapsed();
+    }
+    Ok(())
 }
 
 impl Coupling<'_> {
@@ -226,6 +281,8 @@ impl Simulation {
             gpu: gpu_solver(&config)?,
             props,
             user_stage: None,
+            #[cfg(feature = "gpu")]
+            device_scratch: Vec::new(),
             contact: ContactDef::default(),
         };
         #[cfg(not(feature = "gpu"))]
@@ -317,6 +374,10 @@ impl Simulation {
                 None => {
                     // Every substep in one submit; the state comes back once, for the scatter.
                     gpu.run(substeps)?;
+                    gpu.read_back(&mut self.packed)?;
+                }
+                Some(Coupling::Own(p)) if gpu.contacts().is_some() => {
+                    device_frame(gpu, p, &mut self.device_scratch, substeps, h, &mut contacts)?;
                     gpu.read_back(&mut self.packed)?;
                 }
                 Some(c) => {
@@ -411,6 +472,8 @@ impl Simulation {
             let lin = self.solver.coefficients();
             gpu.upload(&self.packed, lin, c.gravity, c.h(), c.integrator)?;
         }
+        #[cfg(feature = "gpu")]
+        self.device_contacts()?;
         self.dirty = false;
         Ok(())
     }
@@ -455,7 +518,42 @@ impl Simulation {
         if let Some(gpu) = &mut self.gpu {
             gpu.set_step(&self.packed, self.solver.coefficients(), self.config.h())?;
         }
+        #[cfg(feature = "gpu")]
+        self.device_contacts()?;
         Ok(())
+    }
+
+    /// With the springs on the GPU and colliders the device stage takes (balls and cuboids,
+    /// no attachments), contacts run there too; otherwise on the CPU, with the state read back
+    /// every substep.
+    #[cfg(feature = "gpu")]
+    fn device_contacts(&mut self) -> Result<(), SimError> {
+        let (Some(gpu), Some(p)) = (&mut self.gpu, &self.props) else {
+            return Ok(());
+        };
+        if !p.device_ready() {
+            return Ok(());
+        }
+        let masses = p.device_masses(&self.packed);
+        let c = p.contact();
+        gpu.enable_contacts(&crate::gpu::contacts::ContactSetup {
+            masses: &masses,
+            colliders: p.colliders().len(),
+            slots: self.config.substeps,
+            h: self.config.h(),
+            thickness: c.thickness,
+            restitution: c.restitution,
+        })?;
+        Ok(())
+    }
+
+    /// Whether the contact stage runs on the GPU.
+    pub fn contacts_on_gpu(&mut self) -> bool {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            return gpu.contacts().is_some();
+        }
+        false
     }
 
     /// The rigid props (rapier world, contact statistics), when the scene has bodies.

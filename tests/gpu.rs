@@ -58,6 +58,11 @@ fn the_embedded_shader_is_the_file() {
     )
     .expect("readable");
     assert_eq!(gpu::SHADER, file);
+    let file = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"),
+    )
+    .expect("readable");
+    assert_eq!(gpu::contacts::SHADER, file);
 }
 
 /// Size and member offsets of the WGSL struct `name`, from naga's layout.
@@ -80,13 +85,14 @@ fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
 }
 
 macro_rules! check_layout {
-    ($module:expr, $ty:ident { $($field:ident),* $(,)? }) => {{
+    ($module:expr, $([$m:ident])? $ty:ident { $($field:ident),* $(,)? }) => {{
         let (size, members) = wgsl_layout($module, stringify!($ty));
+        type Mirror = gpu::$($m::)?$ty;
         let rust: Vec<(String, u32)> = vec![
-            $((stringify!($field).to_string(), offset_of!(gpu::$ty, $field) as u32)),*
+            $((stringify!($field).to_string(), offset_of!(Mirror, $field) as u32)),*
         ];
         assert_eq!(members, rust, "{}: member names and offsets", stringify!($ty));
-        assert_eq!(size as usize, size_of::<gpu::$ty>(), "{}: size", stringify!($ty));
+        assert_eq!(size as usize, size_of::<Mirror>(), "{}: size", stringify!($ty));
     }};
 }
 
@@ -116,6 +122,48 @@ fn pod_mirrors_match_the_wgsl_layouts() {
             _pad1
         }
     );
+    let contact_module =
+        parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"));
+    {
+        check_layout!(
+            &contact_module,
+            [contacts] Step {
+                h,
+                thickness,
+                restitution,
+                particles,
+                colliders,
+                slot,
+                groups,
+                _pad
+            }
+        );
+        check_layout!(
+            &contact_module,
+            [contacts] Collider {
+                kind,
+                dynamic,
+                _pad0,
+                _pad1,
+                translation,
+                rotation,
+                dims,
+                lin,
+                ang,
+                com,
+                sphere
+            }
+        );
+        check_layout!(
+            &contact_module,
+            [contacts] Partial {
+                impulse,
+                torque,
+                support,
+                support_torque
+            }
+        );
+    }
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides
@@ -366,7 +414,7 @@ fn every_shipped_scene_runs_finite_on_the_gpu() {
             backend: Backend::Gpu,
             ..built.config
         };
-        let mut sim = Simulation::new(built.world, config)
+        let mut sim = Simulation::with_props(built.world, config, built.props)
             .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
         // Half a simulated second (at least one frame) of every scene.
         let frames = (0.5 / config.dt).ceil().max(1.0) as usize;
@@ -460,4 +508,154 @@ fn specialisation_follows_the_scene() {
     assert!(s.rate && !s.pins, "{s:?}");
     let s = spec(text("explicit-euler", 0.0, false));
     assert_eq!(s.update, 1);
+}
+
+/// The device contact stage against the CPU's (parry's projections and ray casts): random
+/// particles around a ball, a tilted cuboid and a free dynamic ball, slow and fast (the swept
+/// test), one substep without springs or gravity. Particles within 1 mm of a decision boundary
+/// (the thickness shell, a surface) are not generated: f32 and f64 may decide them apart.
+#[test]
+fn device_contacts_match_the_cpu_stage() {
+    let Some(_ctx) = context() else { return };
+    let seed = common::seed();
+    let mut rng = fastrand::Rng::with_seed(seed);
+    let thickness = 0.01;
+    let h = 1.0 / 600.0;
+    let bodies = r#"
+        (kind: Fixed, shape: Ball(radius: 0.3), position: (0.0, 0.0, 0.0), friction: 0.4),
+        (kind: Fixed, shape: Cuboid(half_extents: (0.3, 0.05, 0.2)), position: (1.0, 0.0, 0.0),
+         rotation: (0.3, 0.2, 0.5)),
+        (kind: Dynamic, shape: Ball(radius: 0.2), position: (-1.0, 0.0, 0.0), mass: 0.5,
+         velocity: (0.3, -0.2, 0.1), angular_velocity: (1.0, 2.0, -1.0)),"#;
+    // Shapes as parry sees them, to keep generated particles off the boundaries.
+    let probe = Scene::parse(
+        &format!("Scene(dt: {h}, substeps: Some(1), gravity: (0.0, 0.0, 0.0), bodies: [{bodies}])"),
+        "probe",
+    )
+    .expect("valid");
+    let probe = Simulation::from_scene(&probe).expect("builds");
+    let colliders: Vec<_> = probe
+        .props()
+        .expect("props")
+        .colliders()
+        .iter()
+        .map(|(_, c)| (c.shape().clone_dyn(), *c.position()))
+        .collect();
+    let near_boundary = |x: DVec3| {
+        colliders.iter().any(|(shape, pose)| {
+            let p = shape.project_point(pose, x.as_vec3(), false);
+            let d = (x.as_vec3() - p.point).length() as f64;
+            d < 1e-3 || (d - thickness).abs() < 1e-3
+        })
+    };
+    // Distance outside the nearest collider (0 inside).
+    let gap = |x: DVec3| {
+        colliders
+            .iter()
+            .map(|(shape, pose)| {
+                let p = shape.project_point(pose, x.as_vec3(), false);
+                if p.is_inside {
+                    0.0
+                } else {
+                    (x.as_vec3() - p.point).length() as f64
+                }
+            })
+            .fold(f64::MAX, f64::min)
+    };
+    let centres = [
+        DVec3::ZERO,
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(-1.0, 0.0, 0.0),
+    ];
+    let mut particles = String::new();
+    let mut count = 0;
+    while count < 800 {
+        let c = centres[rng.usize(..3)];
+        let x = c + DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 0.9;
+        let fast = rng.f64() < 0.2;
+        let speed = if fast { 30.0 } else { 2.0 };
+        let v = DVec3::new(rng.f64() - 0.5, rng.f64() - 0.5, rng.f64() - 0.5) * 2.0 * speed;
+        let x1 = x + h * v;
+        if near_boundary(x) || near_boundary(x1) || gap(x).min(gap(x1)) > 0.03 {
+            continue;
+        }
+        particles += &format!(
+            "(position: ({}, {}, {}), velocity: ({}, {}, {}), mass: {}),",
+            x.x,
+            x.y,
+            x.z,
+            v.x,
+            v.y,
+            v.z,
+            0.001 + rng.f64() * 0.01
+        );
+        count += 1;
+    }
+    let text = format!(
+        "Scene(dt: {h}, substeps: Some(1), gravity: (0.0, 0.0, 0.0), integrator: Some(\"symplectic-euler\"),
+               particles: [{particles}], bodies: [{bodies}],
+               contact: (thickness: {thickness}, friction: 0.5, kinetic_friction: 0.3, restitution: 0.2))"
+    );
+    let scene = Scene::parse(&text, "contact_parity").expect("valid");
+    let run = |backend| {
+        let built = scene.build();
+        let config = SimConfig {
+            backend,
+            ..built.config
+        };
+        let mut sim = Simulation::with_props(built.world, config, built.props).expect("builds");
+        sim.step().expect("finite");
+        sim
+    };
+    let mut cpu = run(Backend::Cpu);
+    let mut gpu = run(Backend::Gpu);
+    assert!(gpu.contacts_on_gpu(), "balls and cuboids run on the device");
+    assert!(!cpu.contacts_on_gpu());
+    let (sc, sg) = (
+        *cpu.props().expect("props").stats(),
+        *gpu.props().expect("props").stats(),
+    );
+    assert!(sc.contacts > 50 && sc.swept > 5, "too few cases: {sc:?}");
+    assert_eq!(
+        (sc.contacts, sc.swept),
+        (sg.contacts, sg.swept),
+        "seed {seed}"
+    );
+    let mut worst: (f64, usize) = (0.0, 0);
+    for i in 0..cpu.positions().len() {
+        let dx = (cpu.positions()[i] - gpu.positions()[i]).length();
+        let dv = (cpu.velocities()[i] - gpu.velocities()[i]).length() * h;
+        if dx.max(dv) > worst.0 {
+            worst = (dx.max(dv), i);
+        }
+    }
+    assert!(
+        worst.0 < 5e-5,
+        "seed {seed}: particle {} differs by {:.3e} m",
+        worst.1,
+        worst.0
+    );
+    let (jc, jg) = (sc.impulse_on_bodies, sg.impulse_on_bodies);
+    assert!(jc.length() > 0.0, "the dynamic ball was not pushed");
+    assert!(
+        (jc - jg).length() < 1e-4 * jc.length().max(1e-3),
+        "seed {seed}: impulse on bodies CPU {jc}, GPU {jg}"
+    );
+    let body = |sim: &Simulation| {
+        let b = sim
+            .props()
+            .expect("props")
+            .bodies()
+            .iter()
+            .nth(2)
+            .expect("ball")
+            .1;
+        (b.linvel().as_dvec3(), b.angvel().as_dvec3())
+    };
+    let ((lc, ac), (lg, ag)) = (body(&cpu), body(&gpu));
+    assert!(
+        (lc - lg).length() < 1e-4 && (ac - ag).length() < 1e-3,
+        "seed {seed}: ball CPU {lc} {ac}, GPU {lg} {ag}"
+    );
+    eprintln!("seed {seed}: {sc:?}; worst particle {:.3e} m", worst.0);
 }

@@ -20,6 +20,7 @@ use crate::integrate::harmonic::Linear;
 use crate::integrate::{Integrator, SGS_SWEEPS};
 
 pub mod bench;
+pub mod contacts;
 
 /// The WGSL source of every kernel.
 pub const SHADER: &str = include_str!("../../shaders/integrate.wgsl");
@@ -363,6 +364,8 @@ pub struct GpuSolver {
     host_pos: Vec<Position>,
     host_vel: Vec<[f32; 4]>,
     h: f32,
+    /// The contact stage on the device, when the scene's colliders allow it.
+    contacts: Option<contacts::DeviceContacts>,
 }
 
 impl GpuSolver {
@@ -427,6 +430,7 @@ impl GpuSolver {
             host_pos: Vec::new(),
             host_vel: Vec::new(),
             h: f32::NAN,
+            contacts: None,
         })
     }
 
@@ -480,6 +484,7 @@ impl GpuSolver {
         h: f64,
         integrator: Integrator,
     ) -> Result<(), GpuError> {
+        self.contacts = None;
         let mut spec = Specialisation::of(packed, lin, integrator);
         if !self.specialise {
             spec = spec.general();
@@ -658,11 +663,49 @@ impl GpuSolver {
         Ok(())
     }
 
+    /// Puts the contact stage on the device over the state uploaded last (call after each
+    /// upload and step change); every substep then ends with the contact pass.
+    pub fn enable_contacts(&mut self, setup: &contacts::ContactSetup<'_>) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        self.contacts = Some(contacts::DeviceContacts::new(
+            &self.ctx, &b.pos, &b.vel, setup,
+        )?);
+        Ok(())
+    }
+
+    /// The device contact stage, when enabled.
+    pub fn contacts(&mut self) -> Option<&mut contacts::DeviceContacts> {
+        self.contacts.as_mut()
+    }
+
+    /// Waits for the queued work; the contact partials of slots `first..first + count`.
+    pub fn read_partials(
+        &mut self,
+        first: u32,
+        count: u32,
+    ) -> Result<&[contacts::Partial], GpuError> {
+        match &mut self.contacts {
+            Some(c) => c.read(&self.ctx, first, count),
+            None => Ok(&[]),
+        }
+    }
+
     /// Encodes `substeps` substeps into one submit. Nothing is read back.
     pub fn run(&mut self, substeps: u32) -> Result<(), GpuError> {
+        self.run_slots(0, substeps)
+    }
+
+    /// As [`Self::run`], the substeps using contact slots `first..first + substeps`.
+    pub fn run_slots(&mut self, first: u32, substeps: u32) -> Result<(), GpuError> {
         let (Some(b), Some(p)) = (&self.buffers, &self.pipelines) else {
             return Ok(());
         };
+        let contacts = self.contacts.as_ref();
+        if let Some(c) = contacts {
+            c.flush(&self.ctx.queue);
+        }
         let kernel = self.kernel;
         let ctx = &self.ctx;
         ctx.scoped("step", || {
@@ -676,8 +719,8 @@ impl GpuSolver {
                     label: Some("substeps"),
                     timestamp_writes: None,
                 });
-                pass.set_bind_group(0, &b.bind_group, &[0]);
-                for _ in 0..substeps {
+                for s in 0..substeps {
+                    pass.set_bind_group(0, &b.bind_group, &[0]);
                     match kernel {
                         Kernel::Jacobi => {
                             pass.set_pipeline(&p.spring_pass);
@@ -702,6 +745,9 @@ impl GpuSolver {
                             pass.set_pipeline(&p.drift);
                             dispatch(&mut pass, b.particles);
                         }
+                    }
+                    if let Some(c) = contacts {
+                        c.encode(&mut pass, first + s);
                     }
                 }
             }
