@@ -13,14 +13,10 @@ use rapier3d::prelude::*;
 
 use crate::scene::{Anchor, Cloth, Plane};
 
-/// Positions at `seconds` (in our cloth's particle order) and the wall time of the steps.
-/// `substeps` is rapier's `num_solver_iterations` per 1/60 s step (its default is 4).
-pub fn run_cloth(
+/// rapier's cloth for ours: the builder, and rapier's particle index of our (column, row).
+fn rapier_cloth(
     cloth: &Cloth,
-    gravity: DVec3,
-    seconds: f64,
-    substeps: usize,
-) -> Result<(Vec<DVec3>, f64), String> {
+) -> Result<(SoftBodyBuilder, impl Fn(usize, usize) -> usize), String> {
     let (cols, rows) = (cloth.resolution.0 as usize, cloth.resolution.1 as usize);
     if cloth
         .pins
@@ -53,7 +49,7 @@ pub fn run_cloth(
         cloth.origin[2] as f32,
     );
     // rapier's particle (i, j) = origin + i du + j dv has index i·rows + j; ours (col, row) is row·cols + col.
-    let rapier_index = |col: usize, row: usize| col * rows + row;
+    let rapier_index = move |col: usize, row: usize| col * rows + row;
     let mut pins = Vec::new();
     for p in &cloth.pins {
         pins.push(match p {
@@ -68,26 +64,101 @@ pub fn run_cloth(
             edge_softness: edge,
             bend_softness: bend,
             ..Default::default()
-        })
-        .no_surface_collider();
+        });
+    Ok((builder, rapier_index))
+}
+
+/// rapier's particle positions in our particle order.
+fn our_order(body: &SoftBody, cloth: &Cloth, index: impl Fn(usize, usize) -> usize) -> Vec<DVec3> {
+    let (cols, rows) = (cloth.resolution.0 as usize, cloth.resolution.1 as usize);
+    let mut out = vec![DVec3::ZERO; cols * rows];
+    for row in 0..rows {
+        for col in 0..cols {
+            let p = body.particle_position(index(col, row));
+            out[row * cols + col] = DVec3::new(p.x as f64, p.y as f64, p.z as f64);
+        }
+    }
+    out
+}
+
+/// Positions at `seconds` (in our cloth's particle order) and the wall time of the steps.
+/// `substeps` is rapier's `num_solver_iterations` per 1/60 s step (its default is 4).
+pub fn run_cloth(
+    cloth: &Cloth,
+    gravity: DVec3,
+    seconds: f64,
+    substeps: usize,
+) -> Result<(Vec<DVec3>, f64), String> {
+    let (builder, index) = rapier_cloth(cloth)?;
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
     world.integration_parameters.num_solver_iterations = substeps;
     let dt = world.integration_parameters.dt as f64;
-    let handle = world.insert_soft_body(builder);
+    let handle = world.insert_soft_body(builder.no_surface_collider());
     let frames = (seconds / dt).round() as usize;
     let t = Instant::now();
     for _ in 0..frames {
         world.step();
     }
     let wall = t.elapsed().as_secs_f64();
-    let body = &world.soft_bodies[handle];
-    let mut out = vec![DVec3::ZERO; cols * rows];
+    Ok((our_order(&world.soft_bodies[handle], cloth, index), wall))
+}
+
+/// rapier's cloth dropped on a fixed ball (its own contacts: the cloth's surface collider with
+/// a skin of `thickness`, friction `friction`): positions at `seconds` in our particle order,
+/// and the wall time of the steps (rapier's default 60 Hz step and solver iterations).
+pub fn drape_on_ball(
+    cloth: &Cloth,
+    gravity: DVec3,
+    centre: DVec3,
+    radius: f64,
+    thickness: f64,
+    friction: f64,
+    seconds: f64,
+) -> Result<(Vec<DVec3>, f64), String> {
+    let (builder, index) = rapier_cloth(cloth)?;
+    let mut world = PhysicsWorld::new();
+    world.gravity = gravity.as_vec3();
+    let dt = world.integration_parameters.dt as f64;
+    world.insert(
+        RigidBodyBuilder::fixed().translation(centre.as_vec3()),
+        ColliderBuilder::ball(radius as f32).friction(friction as f32),
+    );
+    let handle = world.insert_soft_body(builder.particle_radius(thickness as f32));
+    let frames = (seconds / dt).round() as usize;
+    let t = Instant::now();
+    for _ in 0..frames {
+        world.step();
+    }
+    let wall = t.elapsed().as_secs_f64();
+    Ok((our_order(&world.soft_bodies[handle], cloth, index), wall))
+}
+
+/// Largest and mean strain |ℓ − ℓ0|/ℓ0 of a cloth's structural edges (grid neighbours), from
+/// positions in our particle order.
+pub fn grid_strain(cloth: &Cloth, x: &[DVec3]) -> (f64, f64) {
+    let (cols, rows) = (cloth.resolution.0 as usize, cloth.resolution.1 as usize);
+    let (dx, dy) = (
+        cloth.size.0 / (cols - 1) as f64,
+        cloth.size.1 / (rows - 1) as f64,
+    );
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
     for row in 0..rows {
         for col in 0..cols {
-            let p = body.particle_position(rapier_index(col, row));
-            out[row * cols + col] = DVec3::new(p.x as f64, p.y as f64, p.z as f64);
+            let i = row * cols + col;
+            let mut edge = |j: usize, l0: f64| {
+                let s = ((x[i] - x[j]).length() - l0).abs() / l0;
+                max = max.max(s);
+                sum += s;
+                n += 1;
+            };
+            if col + 1 < cols {
+                edge(i + 1, dx);
+            }
+            if row + 1 < rows {
+                edge(i + cols, dy);
+            }
         }
     }
-    Ok((out, wall))
+    (max, sum / n.max(1) as f64)
 }

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
-use harmonic::{bench, stability, Integrator, Scene, SimError, Simulation};
+use harmonic::{bench, stability, Backend, Integrator, Scene, SimError, Simulation};
 
 #[derive(Parser)]
 #[command(
@@ -83,6 +83,12 @@ enum Command {
         /// Integrators to compare (default: all but the RK4 reference).
         #[arg(long, value_delimiter = ',')]
         integrators: Vec<String>,
+    },
+    /// A cloth scene draped on one fixed ball, run by this engine (CPU) and by rapier 0.36's own
+    /// soft-body cloth on the same ball, side by side: wall time, strain, penetration.
+    DrapePeer {
+        #[arg(default_value = "scenes/drape_sphere.ron")]
+        scene: PathBuf,
     },
 }
 
@@ -163,6 +169,7 @@ fn main() -> ExitCode {
         } => parse_integrators(&integrators).map(|list| {
             print!("{}", bench::report(size, substeps, repeats, &list));
         }),
+        Command::DrapePeer { scene } => drape_peer(&scene),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -378,9 +385,15 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
 
+    let on_gpu = sim.contacts_on_gpu();
     if let Some(p) = sim.props() {
+        let stage = match (on_gpu, sim.backend()) {
+            (true, _) => "on the GPU (balls and cuboids)",
+            (false, Backend::Gpu) => "on the CPU, the state read back every substep (shapes other than balls and cuboids, or attachments)",
+            (false, _) => "on the CPU",
+        };
         println!(
-            "props: {} bod(ies), contact thickness {} m, friction {} static / {} kinetic; rapier steps {}",
+            "props: {} bod(ies), contact thickness {} m, friction {} static / {} kinetic; rapier steps {}; contacts {stage}",
             p.bodies().len(),
             p.contact().thickness,
             p.contact().friction,
@@ -462,6 +475,93 @@ fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Resul
             "{step},{t},{i},{},{},{},{},{},{}",
             x.x, x.y, x.z, v.x, v.y, v.z
         )?;
+    }
+    Ok(())
+}
+
+/// `harmonic drape-peer`: the scene's first cloth on its ball, ours against rapier's.
+fn drape_peer(path: &PathBuf) -> Result<(), String> {
+    use harmonic::peer;
+    use harmonic::scene::props::Shape;
+    let scene = Scene::load(path).map_err(|e| e.to_string())?;
+    let cloth = scene.cloths.first().ok_or("the scene has no cloth")?;
+    let (centre, radius) = scene
+        .bodies
+        .iter()
+        .find_map(|b| match b.shape {
+            Shape::Ball { radius } => Some((glam::DVec3::from(b.position), radius)),
+            _ => None,
+        })
+        .ok_or("the scene has no ball")?;
+    let contact = scene.contact.unwrap_or_default();
+    let seconds = scene.seconds.unwrap_or(3.0);
+    let gravity = glam::DVec3::from(scene.gravity);
+    let figures = |x: &[glam::DVec3]| {
+        let (max, mean) = peer::grid_strain(cloth, x);
+        // How far the deepest particle is inside the ball, and inside the contact shell.
+        let gap = x
+            .iter()
+            .map(|p| (*p - centre).length() - radius)
+            .fold(f64::MAX, f64::min);
+        (
+            max,
+            mean,
+            (-gap).max(0.0),
+            (contact.thickness - gap).max(0.0),
+        )
+    };
+    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
+    let frames = (seconds / sim.config().dt).round() as u64;
+    let t = Instant::now();
+    for _ in 0..frames {
+        sim.step().map_err(|e| e.to_string())?;
+    }
+    let ours = t.elapsed().as_secs_f64();
+    // Scene order: the scene's loose particles, then the first cloth's.
+    let first = scene.particles.len();
+    let n = (cloth.resolution.0 * cloth.resolution.1) as usize;
+    let a = figures(&sim.positions()[first..first + n]);
+    let (y, theirs) = peer::drape_on_ball(
+        cloth,
+        gravity,
+        centre,
+        radius,
+        contact.thickness,
+        contact.friction,
+        seconds,
+    )?;
+    let b = figures(&y);
+    println!(
+        "{n} particles on a ball of radius {radius} m, {seconds} s simulated, contact thickness {} m",
+        contact.thickness
+    );
+    println!();
+    println!("| engine | wall (s) | wall / simulated | max strain | mean strain | deepest inside the ball (m) | deepest inside the shell (m) |");
+    println!("|---|---|---|---|---|---|---|");
+    let sub = sim.config().substeps;
+    for (name, wall, f) in [
+        (
+            format!(
+                "harmonic ({}, {sub} substeps/frame, CPU)",
+                sim.config().integrator.name()
+            ),
+            ours,
+            a,
+        ),
+        (
+            "rapier 0.36 soft-body cloth (defaults)".to_string(),
+            theirs,
+            b,
+        ),
+    ] {
+        println!(
+            "| {name} | {wall:.3} | {:.3} | {:.2} % | {:.3} % | {:.2e} | {:.2e} |",
+            wall / seconds,
+            100.0 * f.0,
+            100.0 * f.1,
+            f.2,
+            f.3
+        );
     }
     Ok(())
 }
