@@ -63,6 +63,8 @@ pub enum SimError {
     DanglingAttachment { particle: Entity },
     #[error("time step must be finite and > 0, got {0}")]
     BadStep(f64),
+    #[error("frame time must be finite and ≥ 0, got {0}")]
+    BadFrameTime(f64),
     #[error("substeps must be ≥ 1")]
     NoSubsteps,
     #[error("spring {spring:?} refers to {end:?}, which is not a particle")]

@@ -55,12 +55,12 @@ pub use error::{Error, GpuError, SceneError, SimError};
 pub use integrate::Integrator;
 pub use scene::Scene;
 pub use schedule::{Stage, StepStats};
-pub use simulation::{Diagnostics, SimConfig, Simulation};
+pub use simulation::{Advance, Diagnostics, RenderView, SimConfig, Simulation};
 
 pub mod prelude {
     pub use crate::{
-        Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation, Spring,
-        StepStats,
+        Advance, Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation,
+        Spring, StepStats,
     };
     pub use glam::DVec3;
 }

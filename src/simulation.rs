@@ -3,7 +3,7 @@
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use hecs::World;
 
 use crate::backend::Backend;
@@ -104,6 +104,54 @@ pub struct Simulation {
     device_scratch: Vec<crate::gpu::contacts::Collider>,
     /// The cloth's contact material for [`Simulation::step_with`].
     contact: ContactDef,
+    /// The game-loop side: fixed-step accumulator and render buffers.
+    frame: Frame,
+}
+
+/// What [`Simulation::advance`] did with a frame's time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Advance {
+    /// Fixed steps of `dt` taken.
+    pub steps: u32,
+    /// Where the render time sits between the last two states, in [0, 1): pass it to
+    /// [`Simulation::render`] to draw without the stutter of whole steps.
+    pub alpha: f64,
+    /// Time dropped because the frame needed more than the cap of steps (s): the simulation
+    /// runs slower than the clock instead of spiralling.
+    pub dropped: f64,
+}
+
+/// Game-loop state: the time not yet stepped, the cap, and the buffers a renderer reads.
+struct Frame {
+    accumulator: f64,
+    max_steps: u32,
+    /// The state before the last step of the last advance.
+    prev: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+}
+
+impl Default for Frame {
+    fn default() -> Self {
+        Self {
+            accumulator: 0.0,
+            max_steps: 8,
+            prev: Vec::new(),
+            triangles: Vec::new(),
+            positions: Vec::new(),
+            normals: Vec::new(),
+        }
+    }
+}
+
+/// What a renderer uploads each frame: positions and normals (f32, one per particle in scene
+/// order) and the triangles indexing them. Borrowed from buffers the simulation keeps, so a
+/// frame allocates nothing.
+pub struct RenderView<'a> {
+    pub positions: &'a [Vec3],
+    pub normals: &'a [Vec3],
+    pub triangles: &'a [[u32; 3]],
 }
 
 /// The rigid side a frame couples with: the scene's own rapier world, or the caller's sets.
@@ -284,6 +332,7 @@ impl Simulation {
             #[cfg(feature = "gpu")]
             device_scratch: Vec::new(),
             contact: ContactDef::default(),
+            frame: Frame::default(),
         };
         #[cfg(not(feature = "gpu"))]
         refuse_gpu(&config)?;
@@ -291,9 +340,97 @@ impl Simulation {
         Ok(sim)
     }
 
+    /// The scene's World, settings, bodies and cloth triangles.
     pub fn from_scene(scene: &Scene) -> Result<Self, SimError> {
         let built = scene.build();
-        Self::with_props(built.world, built.config, built.props)
+        let mut sim = Self::with_props(built.world, built.config, built.props)?;
+        sim.frame.triangles = built.triangles;
+        Ok(sim)
+    }
+
+    /// Game-loop step: adds `frame_dt` (the frame's wall time, s) to the time owed and takes
+    /// as many fixed steps of `dt` as fit, at most [`Self::set_max_steps_per_advance`] (8 by
+    /// default; the rest is dropped, so a slow frame cannot make the next one slower still).
+    /// The answer's `alpha` is for [`Self::render`].
+    ///
+    /// ```
+    /// # use harmonic::prelude::*;
+    /// # let scene = Scene::parse("Scene(dt: 0.01, particles: [(position: (0.0, 0.0, 0.0), mass: 1.0)])", "s").unwrap();
+    /// let mut sim = Simulation::from_scene(&scene)?;
+    /// let a = sim.advance(0.025)?; // 2.5 steps of 0.01 s owed
+    /// assert_eq!((a.steps, (a.alpha * 100.0).round()), (2, 50.0));
+    /// # Ok::<(), harmonic::SimError>(())
+    /// ```
+    pub fn advance(&mut self, frame_dt: f64) -> Result<Advance, SimError> {
+        if !(frame_dt.is_finite() && frame_dt >= 0.0) {
+            return Err(SimError::BadFrameTime(frame_dt));
+        }
+        let dt = self.config.dt;
+        self.frame.accumulator += frame_dt;
+        let mut steps = 0;
+        while self.frame.accumulator >= dt && steps < self.frame.max_steps {
+            self.frame.prev.clone_from(&self.packed.x);
+            self.step()?;
+            self.frame.accumulator -= dt;
+            steps += 1;
+        }
+        let dropped = (self.frame.accumulator - dt).max(0.0);
+        self.frame.accumulator -= dropped;
+        Ok(Advance {
+            steps,
+            alpha: (self.frame.accumulator / dt).clamp(0.0, 1.0),
+            dropped,
+        })
+    }
+
+    /// The most steps one [`Self::advance`] takes.
+    pub fn set_max_steps_per_advance(&mut self, steps: u32) {
+        self.frame.max_steps = steps.max(1);
+    }
+
+    /// Positions `alpha` of the way from the state before the last advanced step to the
+    /// current one, their vertex normals (area-weighted over the triangles, zero for a particle
+    /// in none), and the triangles: ready for a vertex buffer, without allocation after the
+    /// first frame.
+    pub fn render(&mut self, alpha: f64) -> RenderView<'_> {
+        let f = &mut self.frame;
+        let x = &self.packed.x;
+        let prev = if f.prev.len() == x.len() { &f.prev } else { x };
+        f.positions.clear();
+        f.positions
+            .extend(prev.iter().zip(x).map(|(p, c)| p.lerp(*c, alpha).as_vec3()));
+        f.normals.clear();
+        f.normals.resize(x.len(), Vec3::ZERO);
+        let n = f.positions.len() as u32;
+        for t in &f.triangles {
+            if t.iter().any(|&i| i >= n) {
+                continue;
+            }
+            let [a, b, c] = t.map(|i| f.positions[i as usize]);
+            // The cross product's length is twice the area: larger faces weigh more.
+            let face = (b - a).cross(c - a);
+            for &i in t {
+                f.normals[i as usize] += face;
+            }
+        }
+        for v in &mut f.normals {
+            *v = v.normalize_or_zero();
+        }
+        RenderView {
+            positions: &f.positions,
+            normals: &f.normals,
+            triangles: &f.triangles,
+        }
+    }
+
+    /// The triangles drawn by [`Self::render`]: the cloths' from a scene, or your own mesh
+    /// over the particles (scene-order indices).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.frame.triangles
+    }
+
+    pub fn set_triangles(&mut self, triangles: Vec<[u32; 3]>) {
+        self.frame.triangles = triangles;
     }
 
     /// Loads, validates and builds a scene file.

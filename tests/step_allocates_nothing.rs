@@ -64,4 +64,22 @@ fn stepping_allocates_nothing() {
             "{integrator} allocates {parallel} times per frame"
         );
     }
+    // The game-loop path: advance (fixed steps from frame times) and render (interpolated
+    // positions, normals, triangles).
+    let mut sim = Simulation::from_scene(&harmonic::bench::hanging_cloth(24)).unwrap();
+    for _ in 0..5 {
+        let a = sim.advance(1.0 / 60.0).unwrap();
+        sim.render(a.alpha);
+    }
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for i in 0..120 {
+        let a = sim.advance(if i % 2 == 0 { 0.01 } else { 0.02 }).unwrap();
+        let view = sim.render(a.alpha);
+        assert_eq!(view.positions.len(), view.normals.len());
+    }
+    let game_loop = ALLOCS.load(Ordering::Relaxed) - before;
+    assert_eq!(
+        game_loop, 0,
+        "advance + render allocated {game_loop} times in 120 frames"
+    );
 }

@@ -14,6 +14,9 @@ pub struct BuiltScene {
     pub config: SimConfig,
     /// The rapier world of the scene's bodies; None without bodies (no contact stage then).
     pub props: Option<crate::contacts::Props>,
+    /// The cloths' triangles, as scene indices (counter-clockwise seen from the side the
+    /// cloth's normal points to: +y for horizontal cloths, +z for vertical ones).
+    pub triangles: Vec<[u32; 3]>,
 }
 
 impl SpringSpec {
@@ -37,6 +40,7 @@ impl SpringSpec {
 struct Builder {
     world: World,
     next: u32,
+    triangles: Vec<[u32; 3]>,
 }
 
 impl Builder {
@@ -97,6 +101,15 @@ impl Builder {
         };
         let origin = DVec3::from(c.origin);
         let vel = DVec3::from(c.velocity);
+        let base = self.next;
+        for row in 0..rows - 1 {
+            for col in 0..cols - 1 {
+                let a = base + (row * cols + col) as u32;
+                let (b, c) = (a + 1, a + cols as u32);
+                self.triangles.push([a, c, b]);
+                self.triangles.push([b, c, c + 1]);
+            }
+        }
         let mut ids = Vec::with_capacity(cols * rows);
         for row in 0..rows {
             for col in 0..cols {
@@ -179,6 +192,7 @@ impl Scene {
         let mut b = Builder {
             world: World::new(),
             next: 0,
+            triangles: Vec::new(),
         };
         let ids: Vec<Entity> = self
             .particles
@@ -206,6 +220,7 @@ impl Scene {
         let props = self.build_props(&mut b.world);
         BuiltScene {
             props,
+            triangles: b.triangles,
             world: b.world,
             config: SimConfig {
                 dt: self.dt,
