@@ -75,9 +75,6 @@ pub struct Props {
     substep: u32,
     substeps: u32,
     stage: ContactStage,
-    /// The dynamic body (if any) of each collider given to the device stage, in its order.
-    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
-    device_bodies: Vec<Option<RigidBodyHandle>>,
 }
 
 /// The contact stage's buffers and statistics: attachments, then particles against colliders.
@@ -251,7 +248,6 @@ impl Props {
                 substep: 0,
                 substeps: 1,
                 stage: ContactStage::new(contact),
-                device_bodies: Vec::new(),
             },
             handles,
         ))
@@ -416,20 +412,17 @@ impl ContactStage {
         }
     }
 
-    fn contacts(
+    /// The colliders as they stand `ahead` seconds on, those whose grown box meets `cull`
+    /// (all of them without one), into `candidates`: fixed and kinematic first, so a particle
+    /// they touch is supported when a dynamic body then presses on it.
+    fn collect(
         &mut self,
-        packed: &mut Packed,
-        bodies: &mut RigidBodySet,
+        bodies: &RigidBodySet,
         colliders: &ColliderSet,
         ahead: f64,
-        h: f64,
+        cull: Option<(Vec3, Vec3)>,
     ) {
-        let c = self.contact;
-        let margin = c.thickness as f32;
-        // Broad phase, coarse: colliders whose box meets the box of every particle path.
-        let Some(cloth_box) = bounds(&packed.x, &self.prev) else {
-            return;
-        };
+        let c = &self.contact;
         self.candidates.clear();
         for (_, co) in colliders.iter() {
             if !co.is_enabled() {
@@ -440,9 +433,11 @@ impl ContactStage {
                 (Some((_, b)), Some(rel)) if ahead > 0.0 && b.is_moving() => posed(b, ahead) * rel,
                 _ => *co.position(),
             };
-            let aabb = co.shape().compute_aabb(&pose).loosened(margin);
-            if !(aabb.mins.cmple(cloth_box.1).all() && aabb.maxs.cmpge(cloth_box.0).all()) {
-                continue;
+            let aabb = co.shape().compute_aabb(&pose).loosened(c.thickness as f32);
+            if let Some((lo, hi)) = cull {
+                if !(aabb.mins.cmple(hi).all() && aabb.maxs.cmpge(lo).all()) {
+                    continue;
+                }
             }
             let (lin, ang, com, dynamic, mass) = body.map_or(
                 (DVec3::ZERO, DVec3::ZERO, DVec3::ZERO, false, 0.0),
@@ -476,13 +471,27 @@ impl ContactStage {
                 mu_k: (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s),
             });
         }
+        self.candidates.sort_by_key(|c| c.dynamic);
+    }
+
+    fn contacts(
+        &mut self,
+        packed: &mut Packed,
+        bodies: &mut RigidBodySet,
+        colliders: &ColliderSet,
+        ahead: f64,
+        h: f64,
+    ) {
+        let c = self.contact;
+        // Broad phase, coarse: colliders whose box meets the box of every particle path.
+        let Some(cloth_box) = bounds(&packed.x, &self.prev) else {
+            return;
+        };
+        self.collect(bodies, colliders, ahead, Some(cloth_box));
         let nc = self.candidates.len();
         if nc == 0 {
             return;
         }
-        // Colliders that cannot be pushed first: a particle they touch is supported when a
-        // dynamic body then presses on it.
-        self.candidates.sort_by_key(|c| c.dynamic);
         let chunks = packed.x.len().div_ceil(CHUNK);
         self.sums.clear();
         self.sums.resize(chunks * nc, Exchange::default());
@@ -639,66 +648,41 @@ mod device {
                 .collect()
         }
 
-        /// The colliders as they stand (after [`Self::step_bodies`]), fixed and kinematic first
-        /// as the CPU stage orders them; remembers which body each one pushes.
+        /// The colliders as they stand (after [`Self::step_bodies`]), in the CPU stage's order
+        /// and with its motions and friction ([`ContactStage::collect`]); the stage keeps them to
+        /// know which body each partial pushes.
         pub fn device_colliders(&mut self, out: &mut Vec<Collider>) {
-            out.clear();
-            self.device_bodies.clear();
-            let c = self.stage.contact;
             let (bodies, colliders) = (&self.physics.bodies, &self.physics.colliders);
-            for pass in [false, true] {
-                for (_, co) in colliders.iter() {
-                    let body = co.parent().and_then(|p| bodies.get(p).map(|b| (p, b)));
-                    let dynamic = body.is_some_and(|(_, b)| b.is_dynamic());
-                    if dynamic != pass || !co.is_enabled() {
-                        continue;
-                    }
-                    let pose = *co.position();
-                    let (kind, dims) = match co.shape().shape_type() {
-                        ShapeType::Ball => (
-                            0,
-                            [co.shape().as_ball().map_or(0.0, |b| b.radius), 0.0, 0.0],
-                        ),
-                        _ => (
-                            1,
-                            co.shape()
-                                .as_cuboid()
-                                .map_or([0.0; 3], |b| b.half_extents.to_array()),
-                        ),
-                    };
-                    let (lin, ang, com, mass) = body
-                        .map_or((Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, 0.0), |(_, b)| {
-                            (b.linvel(), b.angvel(), b.center_of_mass(), b.mass())
-                        });
-                    let mu_s = 0.5 * (c.friction + co.friction() as f64);
-                    let mu_k = (0.5 * (c.kinetic_friction + co.friction() as f64)).min(mu_s);
-                    let sphere = co.shape().compute_bounding_sphere(&pose);
-                    let q = pose.rotation;
-                    out.push(Collider {
-                        kind,
-                        dynamic: u32::from(dynamic),
-                        translation: pose.translation.extend(0.0).to_array(),
-                        rotation: [q.x, q.y, q.z, q.w],
-                        dims: [dims[0], dims[1], dims[2], 0.0],
-                        lin: lin.extend(mu_s as f32).to_array(),
-                        ang: ang.extend(mu_k as f32).to_array(),
-                        com: com.extend(mass).to_array(),
-                        sphere: sphere
-                            .center
-                            .extend(sphere.radius + c.thickness as f32)
-                            .to_array(),
-                        ..Collider::default()
-                    });
-                    self.device_bodies
-                        .push(body.filter(|_| dynamic).map(|(p, _)| p));
+            self.stage.collect(bodies, colliders, 0.0, None);
+            out.clear();
+            out.extend(self.stage.candidates.iter().map(|cand| {
+                let (kind, dims) = match (cand.shape.as_ball(), cand.shape.as_cuboid()) {
+                    (Some(b), _) => (0, Vec3::new(b.radius, 0.0, 0.0)),
+                    (None, Some(b)) => (1, b.half_extents),
+                    (None, None) => (1, Vec3::ZERO),
+                };
+                let f = |v: DVec3, w: f64| v.as_vec3().extend(w as f32).to_array();
+                let q = cand.pose.rotation;
+                Collider {
+                    kind,
+                    dynamic: u32::from(cand.dynamic),
+                    translation: cand.pose.translation.extend(0.0).to_array(),
+                    rotation: [q.x, q.y, q.z, q.w],
+                    dims: dims.extend(0.0).to_array(),
+                    lin: f(cand.lin, cand.mu_s),
+                    ang: f(cand.ang, cand.mu_k),
+                    com: f(cand.com, cand.mass),
+                    sphere: f(cand.centre, cand.reach),
+                    ..Collider::default()
                 }
-            }
+            }));
         }
 
         /// One substep's partials (`[workgroup][collider]`), summed in workgroup order, into
         /// the statistics and onto the dynamic bodies.
         pub fn apply_device(&mut self, partials: &[Partial], groups: usize, colliders: usize) {
-            for (ci, body) in self.device_bodies.iter().enumerate() {
+            let stage = &mut self.stage;
+            for (ci, cand) in stage.candidates.iter().enumerate() {
                 let mut total = Exchange::default();
                 for g in 0..groups {
                     let p = &partials[g * colliders + ci];
@@ -714,12 +698,8 @@ mod device {
                         support_torque: v(p.support_torque),
                     });
                 }
-                apply(
-                    &mut self.stage.stats,
-                    &mut self.physics.bodies,
-                    *body,
-                    &total,
-                );
+                let body = cand.body.filter(|_| cand.dynamic);
+                apply(&mut stage.stats, &mut self.physics.bodies, body, &total);
             }
         }
     }

@@ -93,15 +93,8 @@ pub fn run_cloth(
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
     world.integration_parameters.num_solver_iterations = substeps;
-    let dt = world.integration_parameters.dt as f64;
     let handle = world.insert_soft_body(builder.no_surface_collider());
-    let frames = (seconds / dt).round() as usize;
-    let t = Instant::now();
-    for _ in 0..frames {
-        world.step();
-    }
-    let wall = t.elapsed().as_secs_f64();
-    Ok((our_order(&world.soft_bodies[handle], cloth, index), wall))
+    Ok(timed_run(&mut world, handle, seconds, cloth, index))
 }
 
 /// rapier's cloth dropped on a fixed ball (its own contacts: the cloth's surface collider with
@@ -119,19 +112,30 @@ pub fn drape_on_ball(
     let (builder, index) = rapier_cloth(cloth)?;
     let mut world = PhysicsWorld::new();
     world.gravity = gravity.as_vec3();
-    let dt = world.integration_parameters.dt as f64;
     world.insert(
         RigidBodyBuilder::fixed().translation(centre.as_vec3()),
         ColliderBuilder::ball(radius as f32).friction(friction as f32),
     );
     let handle = world.insert_soft_body(builder.particle_radius(thickness as f32));
-    let frames = (seconds / dt).round() as usize;
+    Ok(timed_run(&mut world, handle, seconds, cloth, index))
+}
+
+/// Steps `world` through `seconds` at its own step: the soft body's positions (our order) and
+/// the wall time of the steps.
+fn timed_run(
+    world: &mut PhysicsWorld,
+    handle: SoftBodyHandle,
+    seconds: f64,
+    cloth: &Cloth,
+    index: impl Fn(usize, usize) -> usize,
+) -> (Vec<DVec3>, f64) {
+    let frames = (seconds / world.integration_parameters.dt as f64).round() as usize;
     let t = Instant::now();
     for _ in 0..frames {
         world.step();
     }
     let wall = t.elapsed().as_secs_f64();
-    Ok((our_order(&world.soft_bodies[handle], cloth, index), wall))
+    (our_order(&world.soft_bodies[handle], cloth, index), wall)
 }
 
 /// Largest and mean strain |ℓ − ℓ0|/ℓ0 of a cloth's structural edges (grid neighbours), from

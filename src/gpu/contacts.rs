@@ -283,43 +283,23 @@ impl DeviceContacts {
         let size = std::mem::size_of::<Partial>();
         let (from, len) = (first as usize * per_slot, count as usize * per_slot);
         let bytes = (len * size) as u64;
-        ctx.scoped("read partials", || {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("read partials"),
-                });
-            encoder.copy_buffer_to_buffer(
-                &self.partials,
-                (from * size) as u64,
-                &self.staging,
-                0,
-                bytes,
-            );
-            ctx.queue.submit([encoder.finish()]);
-        })?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.staging
-            .slice(..bytes)
-            .map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
-            });
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        match rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(GpuError::Readback(e.to_string())),
-            Err(e) => return Err(GpuError::Readback(e.to_string())),
-        }
-        {
-            let view = self
-                .staging
-                .get_mapped_range(..bytes)
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            self.host_partials[..len].copy_from_slice(bytemuck::cast_slice(&view));
-        }
-        self.staging.unmap();
+        let host = &mut self.host_partials[..len];
+        super::read_staging(
+            ctx,
+            "read partials",
+            &self.staging,
+            bytes,
+            |encoder| {
+                encoder.copy_buffer_to_buffer(
+                    &self.partials,
+                    (from * size) as u64,
+                    &self.staging,
+                    0,
+                    bytes,
+                );
+            },
+            |view| host.copy_from_slice(bytemuck::cast_slice(view)),
+        )?;
         Ok(&self.host_partials[..len])
     }
 

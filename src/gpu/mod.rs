@@ -767,49 +767,27 @@ impl GpuSolver {
         if n == 0 {
             return Ok(());
         }
-        let ctx = &self.ctx;
-        ctx.scoped("read back", || {
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("read back"),
-                });
-            encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
-            encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
-            ctx.queue.submit([encoder.finish()]);
-        })?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        b.staging
-            .slice(..)
-            .map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
-            });
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
-        match rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(GpuError::Readback(e.to_string())),
-            Err(e) => return Err(GpuError::Readback(e.to_string())),
-        }
-        {
-            let view = b
-                .staging
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
-            let bytes: &[u8] = &view;
-            let pos: &[Position] = bytemuck::cast_slice(&bytes[..pos_bytes as usize]);
-            let vel: &[[f32; 4]] =
-                bytemuck::cast_slice(&bytes[pos_bytes as usize..(pos_bytes + vel_bytes) as usize]);
-            for (x, p) in packed.x.iter_mut().zip(pos) {
-                *x = p.to_f64();
-            }
-            for (v, w) in packed.v.iter_mut().zip(vel) {
-                *v = DVec3::new(w[0].into(), w[1].into(), w[2].into());
-            }
-        }
-        b.staging.unmap();
-        Ok(())
+        let total = pos_bytes + vel_bytes;
+        read_staging(
+            &self.ctx,
+            "read back",
+            &b.staging,
+            total,
+            |encoder| {
+                encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
+                encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
+            },
+            |bytes| {
+                let pos: &[Position] = bytemuck::cast_slice(&bytes[..pos_bytes as usize]);
+                let vel: &[[f32; 4]] = bytemuck::cast_slice(&bytes[pos_bytes as usize..]);
+                for (x, p) in packed.x.iter_mut().zip(pos) {
+                    *x = p.to_f64();
+                }
+                for (v, w) in packed.v.iter_mut().zip(vel) {
+                    *v = DVec3::new(w[0].into(), w[1].into(), w[2].into());
+                }
+            },
+        )
     }
 
     /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts),
@@ -863,6 +841,46 @@ impl GpuSolver {
             }
         }
     }
+}
+
+/// Encodes `copy` into `staging`, submits it, waits, and hands the first `bytes` of `staging`
+/// to `read`: every read-back from the device goes through here.
+fn read_staging(
+    ctx: &GpuContext,
+    what: &str,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    copy: impl FnOnce(&mut wgpu::CommandEncoder),
+    read: impl FnOnce(&[u8]),
+) -> Result<(), GpuError> {
+    ctx.scoped(what, || {
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
+        copy(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+    })?;
+    let failed = |e: &dyn std::fmt::Display| GpuError::Readback(e.to_string());
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging
+        .slice(..bytes)
+        .map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| failed(&e))?;
+    match rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(failed(&e)),
+        Err(e) => return Err(failed(&e)),
+    }
+    {
+        let view = staging.get_mapped_range(..bytes).map_err(|e| failed(&e))?;
+        read(&view);
+    }
+    staging.unmap();
+    Ok(())
 }
 
 /// Binding `binding` to the whole of `buffer`.
