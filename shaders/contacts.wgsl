@@ -169,11 +169,11 @@ struct Hit {
 }
 
 // Mirrors contacts::surface.
-fn surface(c: Collider, x0: vec3<f32>, x1: vec3<f32>, path: f32, thickness: f32) -> Hit {
+fn surface(c: Collider, x0: vec3<f32>, x1: vec3<f32>, fast: bool, thickness: f32) -> Hit {
     let q = c.rotation;
     let t = c.translation.xyz;
     let d = x1 - x0;
-    if path > thickness {
+    if fast {
         let l0 = unrotate(q, x0 - t);
         if !project_local(c, l0).inside {
             let r = cast_local(c, l0, unrotate(q, d));
@@ -249,12 +249,14 @@ fn contact_pass(
         var supported = false;
         for (var c = 0u; c < nc; c++) {
             let col = colliders[step.slot * step.colliders + c];
-            let path = length(x - x0);
-            // Bounding-sphere rejection, as the CPU stage does.
-            if length(x - col.sphere.xyz) > col.sphere.w + path {
+            // Bounding-sphere rejection, as the CPU stage does: the L1 length bounds the path.
+            let d = x - x0;
+            let path = dot(abs(d), vec3<f32>(1.0));
+            let r = x - col.sphere.xyz;
+            if dot(r, r) > (col.sphere.w + path) * (col.sphere.w + path) {
                 continue;
             }
-            let hit = surface(col, x0, x, path, th);
+            let hit = surface(col, x0, x, dot(d, d) > th * th, th);
             if !hit.found {
                 continue;
             }
@@ -297,11 +299,11 @@ fn contact_pass(
             }
             let dvn = -(1.0 + step.restitution) * vn;
             var vt = rel - vn * n;
-            let speed = length(vt);
-            if speed <= col.lin.w * dvn {
+            let speed2 = dot(vt, vt);
+            if speed2 <= (col.lin.w * dvn) * (col.lin.w * dvn) {
                 vt = vec3<f32>(0.0);
             } else {
-                vt = vt * max(1.0 - col.ang.w * dvn / speed, 0.0);
+                vt = vt * max(1.0 - col.ang.w * dvn / sqrt(speed2), 0.0);
             }
             let old = v;
             v = vb + (vn + dvn) * n + vt;

@@ -91,6 +91,8 @@ pub struct ContactStage {
     candidates: Vec<Candidate>,
     /// Per (particle chunk, candidate): what the chunk did to the candidate's body.
     sums: Vec<Exchange>,
+    /// Per chunk and candidate: whether the candidate's box meets the chunk's paths.
+    near: Vec<bool>,
     pub stats: ContactStats,
 }
 
@@ -338,6 +340,7 @@ impl ContactStage {
             prev: Vec::new(),
             candidates: Vec::new(),
             sums: Vec::new(),
+            near: Vec::new(),
             stats: ContactStats::default(),
         }
     }
@@ -412,16 +415,9 @@ impl ContactStage {
         }
     }
 
-    /// The colliders as they stand `ahead` seconds on, those whose grown box meets `cull`
-    /// (all of them without one), into `candidates`: fixed and kinematic first, so a particle
+    /// The colliders as they stand `ahead` seconds on into `candidates`: fixed and kinematic first, so a particle
     /// they touch is supported when a dynamic body then presses on it.
-    fn collect(
-        &mut self,
-        bodies: &RigidBodySet,
-        colliders: &ColliderSet,
-        ahead: f64,
-        cull: Option<(Vec3, Vec3)>,
-    ) {
+    fn collect(&mut self, bodies: &RigidBodySet, colliders: &ColliderSet, ahead: f64) {
         let c = &self.contact;
         self.candidates.clear();
         for (_, co) in colliders.iter() {
@@ -434,11 +430,6 @@ impl ContactStage {
                 _ => *co.position(),
             };
             let aabb = co.shape().compute_aabb(&pose).loosened(c.thickness as f32);
-            if let Some((lo, hi)) = cull {
-                if !(aabb.mins.cmple(hi).all() && aabb.maxs.cmpge(lo).all()) {
-                    continue;
-                }
-            }
             let (lin, ang, com, dynamic, mass) = body.map_or(
                 (DVec3::ZERO, DVec3::ZERO, DVec3::ZERO, false, 0.0),
                 |(_, b)| {
@@ -483,18 +474,16 @@ impl ContactStage {
         h: f64,
     ) {
         let c = self.contact;
-        // Broad phase, coarse: colliders whose box meets the box of every particle path.
-        let Some(cloth_box) = bounds(&packed.x, &self.prev) else {
-            return;
-        };
-        self.collect(bodies, colliders, ahead, Some(cloth_box));
+        self.collect(bodies, colliders, ahead);
         let nc = self.candidates.len();
-        if nc == 0 {
+        if nc == 0 || packed.x.is_empty() {
             return;
         }
         let chunks = packed.x.len().div_ceil(CHUNK);
         self.sums.clear();
         self.sums.resize(chunks * nc, Exchange::default());
+        self.near.clear();
+        self.near.resize(chunks * nc, false);
         let (candidates, prev, held) = (&self.candidates, &self.prev, &self.held);
         let Packed {
             x,
@@ -509,28 +498,57 @@ impl ContactStage {
         x.par_chunks_mut(CHUNK)
             .zip(v.par_chunks_mut(CHUNK))
             .zip(self.sums.par_chunks_mut(nc))
+            .zip(self.near.par_chunks_mut(nc))
             .enumerate()
-            .for_each(|(k, ((xs, vs), sums))| {
+            .for_each(|(k, (((xs, vs), sums), near))| {
+                // Broad phase, coarse: the colliders whose box meets the box of this chunk's
+                // paths (computed here, while the chunk is in cache).
+                let base = k * CHUNK;
+                let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
+                let mut lo = DVec3::splat(f64::INFINITY);
+                let mut hi = DVec3::splat(f64::NEG_INFINITY);
+                for (j, xi) in xs.iter().enumerate() {
+                    if free(j) {
+                        let x0 = prev[base + j];
+                        lo = lo.min(x0.min(*xi));
+                        hi = hi.max(x0.max(*xi));
+                    }
+                }
+                let mut any = false;
+                for (cand, n) in candidates.iter().zip(near.iter_mut()) {
+                    *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
+                    any |= *n;
+                }
+                if !any {
+                    return;
+                }
                 for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
-                    let i = k * CHUNK + j;
-                    if inv_mass[i] == 0.0 || held[i] {
+                    let i = base + j;
+                    if !free(j) {
                         continue;
                     }
                     let mut supported = false;
-                    for (cand, sum) in candidates.iter().zip(sums.iter_mut()) {
+                    for (ci, cand) in candidates.iter().enumerate() {
+                        if !near[ci] {
+                            continue;
+                        }
+                        let sum = &mut sums[ci];
                         let (x0, x1) = (prev[i], *xi);
                         // Broad phase, fine: this particle's path against this collider's box.
                         if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
                             continue;
                         }
                         // And against its bounding sphere: no point of the path comes closer
-                        // to the centre than |x1 − c| − |x1 − x0|.
-                        let step = x1.distance(x0);
+                        // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
+                        // |x1 − x0| without a square root.
+                        let d = x1 - x0;
+                        let step = d.abs().element_sum();
                         if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
                             continue;
                         }
                         let shape = cand.shape.as_ref();
-                        let Some(hit) = surface(shape, &cand.pose, x0, x1, step, c.thickness)
+                        let fast = d.length_squared() > c.thickness * c.thickness;
+                        let Some(hit) = surface(shape, &cand.pose, x0, x1, fast, c.thickness)
                         else {
                             continue;
                         };
@@ -653,7 +671,7 @@ mod device {
         /// know which body each partial pushes.
         pub fn device_colliders(&mut self, out: &mut Vec<Collider>) {
             let (bodies, colliders) = (&self.physics.bodies, &self.physics.colliders);
-            self.stage.collect(bodies, colliders, 0.0, None);
+            self.stage.collect(bodies, colliders, 0.0);
             out.clear();
             out.extend(self.stage.candidates.iter().map(|cand| {
                 let (kind, dims) = match (cand.shape.as_ball(), cand.shape.as_cuboid()) {
@@ -760,17 +778,18 @@ fn respond(rel: DVec3, normal: DVec3, c: &ContactDef, cand: &Candidate) -> Optio
     }
     let dvn = -(1.0 + c.restitution) * vn;
     let vt = rel - vn * normal;
-    let speed = vt.length();
-    let vt = if speed <= cand.mu_s * dvn {
+    // Static friction compares squares: the common resting case takes no square root.
+    let speed2 = vt.length_squared();
+    let vt = if speed2 <= (cand.mu_s * dvn).powi(2) {
         DVec3::ZERO
     } else {
-        vt * (1.0 - cand.mu_k * dvn / speed).max(0.0)
+        vt * (1.0 - cand.mu_k * dvn / speed2.sqrt()).max(0.0)
     };
     Some((vn + dvn) * normal + vt)
 }
 
 /// Particles per parallel task of the contact stage.
-const CHUNK: usize = 1024;
+const CHUNK: usize = 512;
 
 /// What one chunk of particles did against one collider.
 #[derive(Clone, Copy, Default)]
@@ -800,17 +819,18 @@ struct Hit {
 }
 
 /// The contact of a particle that moved from `x0` to `x1`: its path crossed the surface (ray
-/// cast), or it ends within `thickness` of it or inside (projection).
+/// cast, when `fast`: it moved further than `thickness`), or it ends within `thickness` of it
+/// or inside (projection).
 fn surface(
     shape: &dyn ParryShape,
     pose: &Pose,
     x0: DVec3,
     x1: DVec3,
-    step: f64,
+    fast: bool,
     thickness: f64,
 ) -> Option<Hit> {
     let d = x1 - x0;
-    if step > thickness {
+    if fast {
         // Fast enough to skip a shell: cast the path, from outside only.
         let start = shape.project_point(pose, x0.as_vec3(), false);
         if !start.is_inside {
@@ -853,20 +873,4 @@ fn surface(
         depth: if p.is_inside { dist } else { 0.0 },
         swept: false,
     })
-}
-
-/// The box around two position sets (f32), or None when empty. In parallel: min and max do
-/// not depend on the order.
-fn bounds(a: &[DVec3], b: &[DVec3]) -> Option<(Vec3, Vec3)> {
-    let first = *a.first().or(b.first())?;
-    let fold = |xs: &[DVec3]| {
-        xs.par_chunks(CHUNK)
-            .map(|c| {
-                c.iter()
-                    .fold((first, first), |(lo, hi), x| (lo.min(*x), hi.max(*x)))
-            })
-            .reduce(|| (first, first), |p, q| (p.0.min(q.0), p.1.max(q.1)))
-    };
-    let ((la, ha), (lb, hb)) = (fold(a), fold(b));
-    Some((la.min(lb).as_vec3(), ha.max(hb).as_vec3()))
 }
