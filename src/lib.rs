@@ -42,6 +42,8 @@ pub mod gpu;
 pub mod integrate;
 pub mod metrics;
 pub mod peer;
+#[cfg(feature = "gpu")]
+pub mod render;
 pub mod scene;
 pub mod schedule;
 mod simulation;

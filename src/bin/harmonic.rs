@@ -90,6 +90,38 @@ enum Command {
         #[arg(default_value = "scenes/drape_sphere.ron")]
         scene: PathBuf,
     },
+    /// Render a scene headless to PNG with wgpu offscreen (a software adapter such as Mesa's
+    /// lavapipe works): shaded cloth, rigid bodies, a floor grid.
+    Render(RenderArgs),
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    scene: PathBuf,
+    /// Folder for the pictures (`<scene>_<k>.png`, and `<scene>_sheet.png` with --sheet).
+    #[arg(long, default_value = "render-out")]
+    out: PathBuf,
+    /// Pictures, evenly spaced over the run; the last shows its end.
+    #[arg(long, default_value_t = 1)]
+    frames: u32,
+    /// Picture size, WIDTHxHEIGHT.
+    #[arg(long, default_value = "800x600")]
+    size: String,
+    /// Simulated seconds (default: the scene's `seconds`, else 1).
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Colour the cloth by strain (blue 0 to red at --strain-scale).
+    #[arg(long)]
+    strain: bool,
+    /// Strain drawn fully red.
+    #[arg(long, default_value_t = 0.1)]
+    strain_scale: f32,
+    /// Draw the cloth's triangle edges.
+    #[arg(long)]
+    wireframe: bool,
+    /// Also tile the pictures into one contact sheet.
+    #[arg(long)]
+    sheet: bool,
 }
 
 #[derive(clap::Args)]
@@ -170,6 +202,7 @@ fn main() -> ExitCode {
             print!("{}", bench::report(size, substeps, repeats, &list));
         }),
         Command::DrapePeer { scene } => drape_peer(&scene),
+        Command::Render(args) => render(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -209,17 +242,122 @@ fn gpu_bench(_: &[u32], _: &str, _: u32, _: u32, _: &std::path::Path) -> Result<
     Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
-fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), String> {
+/// A progress bar on stderr when it is a terminal; None otherwise (callers print plain lines).
+fn progress_bar(total: u64) -> Option<indicatif::ProgressBar> {
     use std::io::IsTerminal;
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let bar = std::io::stderr().is_terminal().then(|| {
-        let bar = indicatif::ProgressBar::new(1);
+    std::io::stderr().is_terminal().then(|| {
+        let bar = indicatif::ProgressBar::new(total);
         bar.set_style(
             indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {elapsed_precise} {msg}")
                 .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         bar
-    });
+    })
+}
+
+#[cfg(feature = "gpu")]
+fn render(args: RenderArgs) -> Result<(), String> {
+    use harmonic::render::{bounds, Camera, Image, Offscreen, Style};
+    let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|&v| v > 0);
+    let (width, height) = match args.size.split_once(['x', 'X']) {
+        Some((w, h)) => parse(w).zip(parse(h)),
+        None => None,
+    }
+    .ok_or_else(|| format!("--size {}: expected WIDTHxHEIGHT, e.g. 800x600", args.size))?;
+    if args.frames == 0 {
+        return Err("--frames must be ≥ 1".into());
+    }
+    let scene = Scene::load(&args.scene).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
+    let seconds = args.seconds.or(scene.seconds).unwrap_or(1.0);
+    if !(seconds.is_finite() && seconds >= 0.0) {
+        return Err(format!("--seconds {seconds}: expected a finite time ≥ 0"));
+    }
+    let dt = sim.config().dt;
+    let steps = (seconds / dt).round() as u64;
+    let mut offscreen = Offscreen::new(width, height).map_err(|e| e.to_string())?;
+    println!(
+        "render: {} on {}, {width}x{height}, {} picture(s) over {seconds} s",
+        args.scene.display(),
+        offscreen.renderer().context().describe(),
+        args.frames
+    );
+    // The camera frames the scene as it starts (with a margin); it follows the scene's centre
+    // (a walking character) and backs off when the scene spreads, never closing in.
+    let frame = |sim: &Simulation| {
+        let (lo, hi) = bounds(sim);
+        let pad = 0.05 * (hi - lo);
+        Camera::framing(lo - pad, hi + pad)
+    };
+    let first = frame(&sim);
+    let style = Style {
+        wireframe: args.wireframe,
+        strain: args.strain,
+        strain_scale: args.strain_scale,
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    let stem = args
+        .scene
+        .file_stem()
+        .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+    let bar = progress_bar(steps);
+    let mut pictures = Vec::new();
+    let mut done = 0u64;
+    for k in 1..=args.frames {
+        let target = (steps as f64 * k as f64 / args.frames as f64).round() as u64;
+        while done < target {
+            sim.step().map_err(|e| format!("run stopped: {e}"))?;
+            done += 1;
+            if let Some(b) = &bar {
+                b.set_position(done);
+            }
+        }
+        let now = frame(&sim);
+        let camera = Camera {
+            distance: now.distance.max(first.distance),
+            ..now
+        };
+        let image = offscreen
+            .capture(&mut sim, &camera, &style)
+            .map_err(|e| e.to_string())?;
+        let path = args.out.join(format!("{stem}_{k:03}.png"));
+        image.write_png(&path)?;
+        let line = format!(
+            "wrote {} (t = {:.3} s, {} cloth pixel(s))",
+            path.display(),
+            sim.time(),
+            image.cloth_pixels()
+        );
+        match &bar {
+            Some(b) => b.println(line),
+            None => println!("{line}"),
+        }
+        if args.sheet {
+            pictures.push(image);
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    if args.sheet {
+        let columns = (pictures.len() as f64).sqrt().ceil() as u32;
+        if let Some(sheet) = Image::sheet(&pictures, columns) {
+            let path = args.out.join(format!("{stem}_sheet.png"));
+            sheet.write_png(&path)?;
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+#[cfg(not(feature = "gpu"))]
+fn render(_: RenderArgs) -> Result<(), String> {
+    Err(harmonic::GpuError::NotBuilt.to_string())
+}
+
+fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let bar = progress_bar(1);
     let (rows, refs) =
         harmonic::accuracy::measure(quick, repeats, |done, total, label| match &bar {
             Some(b) => {
@@ -404,12 +542,16 @@ fn run(args: RunArgs) -> Result<(), String> {
     let mut max_strain = start.max_strain;
     let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
     let (mut t_integrate, mut t_contacts) = (0.0, 0.0);
+    let bar = progress_bar(steps);
     let t0 = Instant::now();
     let mut failure = None;
     for step in 1..=steps {
         if let Err(e) = sim.step() {
             failure = Some(e);
             break;
+        }
+        if let Some(b) = &bar {
+            b.set_position(step);
         }
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
@@ -426,6 +568,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     let wall = t0.elapsed().as_secs_f64();
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
     if let Some(w) = traj.as_mut() {
         w.flush().map_err(|e| e.to_string())?;
     }

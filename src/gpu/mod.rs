@@ -291,7 +291,7 @@ impl GpuContext {
     }
 
     /// Runs `f` inside a validation and an out-of-memory error scope.
-    fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+    pub(crate) fn scoped<T>(&self, what: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let out = f();
@@ -845,7 +845,7 @@ impl GpuSolver {
 
 /// Encodes `copy` into `staging`, submits it, waits, and hands the first `bytes` of `staging`
 /// to `read`: every read-back from the device goes through here.
-fn read_staging(
+pub(crate) fn read_staging(
     ctx: &GpuContext,
     what: &str,
     staging: &wgpu::Buffer,
