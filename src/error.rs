@@ -67,6 +67,10 @@ pub enum SimError {
     BadFrameTime(f64),
     #[error("substeps must be ≥ 1")]
     NoSubsteps,
+    #[error("no particle {index} (scene order) in this simulation")]
+    NoParticle { index: usize },
+    #[error("position must be finite, got {0}")]
+    BadPosition(glam::DVec3),
     #[error("spring {spring:?} refers to {end:?}, which is not a particle")]
     DanglingSpring { spring: Entity, end: Entity },
     #[error(

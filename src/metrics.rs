@@ -65,6 +65,16 @@ pub fn first_non_finite(packed: &Packed) -> Option<usize> {
     (0..packed.particle_count()).find(|&i| !(packed.x[i].is_finite() && packed.v[i].is_finite()))
 }
 
+/// How many particles have a non-finite position or velocity.
+pub fn non_finite_count(packed: &Packed) -> usize {
+    packed
+        .x
+        .iter()
+        .zip(&packed.v)
+        .filter(|(x, v)| !(x.is_finite() && v.is_finite()))
+        .count()
+}
+
 /// Total linear momentum of the free particles.
 pub fn momentum(packed: &Packed) -> DVec3 {
     (0..packed.particle_count())

@@ -32,8 +32,9 @@ pub const CLOTH: [f32; 3] = [0.88, 0.42, 0.16];
 pub struct Style {
     /// Draw the cloth's triangle edges.
     pub wireframe: bool,
-    /// Colour the cloth by strain instead of its plain colour: blue (unstretched) through
-    /// green and yellow to red at `strain_scale` or more.
+    /// Colour the cloth by strain (each particle's largest stretch `(l − l0)/l0` over its
+    /// springs) instead of its plain colour: blue (unstretched) through green and yellow to
+    /// red at `strain_scale` or more.
     pub strain: bool,
     /// The strain drawn fully red (0 means 10 %).
     pub strain_scale: f32,
@@ -560,7 +561,8 @@ impl Renderer {
                 if s.rest <= 0.0 {
                     continue;
                 }
-                let e = ((packed.x[a].distance(packed.x[b]) - s.rest).abs() / s.rest) as f32;
+                // Stretch only: folding compresses the bend springs, which is not strain.
+                let e = ((packed.x[a].distance(packed.x[b]) - s.rest).max(0.0) / s.rest) as f32;
                 self.strain[a] = self.strain[a].max(e);
                 self.strain[b] = self.strain[b].max(e);
             }
@@ -594,17 +596,18 @@ impl Renderer {
                 }
             }
             if style.wireframe {
-                let ink = [0.15, 0.12, 0.1];
+                // Edges in a darker shade of the surface: a dense mesh still shows its colours.
                 for t in view.triangles {
                     if t.iter().any(|&i| (i as usize) >= n) {
                         continue;
                     }
                     for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
                         for i in [a, b] {
+                            let c = colour(i as usize, &self.strain);
                             self.line_vertices.push(Vertex {
                                 position: view.positions[i as usize].to_array(),
                                 normal: [0.0; 3],
-                                colour: ink,
+                                colour: c.map(|v| 0.55 * v),
                             });
                         }
                     }

@@ -4,10 +4,11 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use glam::{DVec3, Vec3};
-use hecs::World;
+use hecs::{Entity, World};
 
 use crate::backend::Backend;
 use crate::buffers::Packed;
+use crate::components::Pin;
 use rapier3d::prelude::{ColliderSet, RigidBodySet};
 
 use crate::contacts::{ContactStage, ContactStats, Props};
@@ -76,6 +77,9 @@ pub struct Diagnostics {
     pub max_strain: f64,
     /// `h/h_c` of the stiffest spring (`h_c = π/ω0`).
     pub step_ratio: f64,
+    /// Particles whose position or velocity is not finite (a step that produces one fails, so
+    /// this is 0 unless the state was set from outside).
+    pub non_finite: usize,
 }
 
 /// A mass-spring simulation over a hecs World.
@@ -106,6 +110,8 @@ pub struct Simulation {
     contact: ContactDef,
     /// The game-loop side: fixed-step accumulator and render buffers.
     frame: Frame,
+    /// Particles held by [`Simulation::grab`] that were free before.
+    grabbed: Vec<Entity>,
 }
 
 /// What [`Simulation::advance`] did with a frame's time.
@@ -320,6 +326,7 @@ impl Simulation {
             packed: Packed::default(),
             solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
             dirty: true,
+            grabbed: Vec::new(),
             choice: None,
             parallel: false,
             steps: 0,
@@ -615,6 +622,49 @@ impl Simulation {
         Ok(())
     }
 
+    /// Holds particle `index` (scene order) at `target`, at rest: the mouse drag of a viewer,
+    /// a hand picking cloth up. A free particle is pinned until [`Self::release`]; a pinned
+    /// one is moved. Re-gathers on the next step (like any World change).
+    pub fn grab(&mut self, index: usize, target: DVec3) -> Result<(), SimError> {
+        if !target.is_finite() {
+            return Err(SimError::BadPosition(target));
+        }
+        let entity = self.particle_entity(index)?;
+        if self.world.get::<&Pin>(entity).is_err() {
+            self.world
+                .insert_one(entity, Pin)
+                .map_err(|_| SimError::NoParticle { index })?;
+            self.grabbed.push(entity);
+        }
+        if let Ok(mut p) = self.world.get::<&mut crate::Particle>(entity) {
+            p.position = target;
+            p.velocity = DVec3::ZERO;
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Lets go of a particle [`Self::grab`] pinned (one pinned by its scene stays pinned).
+    pub fn release(&mut self, index: usize) -> Result<(), SimError> {
+        let entity = self.particle_entity(index)?;
+        if let Some(k) = self.grabbed.iter().position(|&e| e == entity) {
+            self.grabbed.swap_remove(k);
+            let _ = self.world.remove_one::<Pin>(entity);
+            self.dirty = true;
+        }
+        Ok(())
+    }
+
+    /// The entity of particle `index` in scene order.
+    pub fn particle_entity(&self, index: usize) -> Result<Entity, SimError> {
+        self.packed
+            .entities
+            .get(index)
+            .copied()
+            .filter(|&e| self.world.contains(e))
+            .ok_or(SimError::NoParticle { index })
+    }
+
     pub fn world(&self) -> &World {
         &self.world
     }
@@ -793,6 +843,7 @@ impl Simulation {
             max_strain: metrics::max_strain(&self.packed),
             step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
                 .map_or(0.0, |r| r.0),
+            non_finite: metrics::non_finite_count(&self.packed),
         }
     }
 }

@@ -255,6 +255,17 @@ impl GpuContext {
             adapter: describe(&info),
             what: e.to_string(),
         })?;
+        Ok(Self::from_device(device, queue, info, limits))
+    }
+
+    /// A context on a device the caller made: a windowed application's, from an adapter
+    /// compatible with its surface (`examples/viewer.rs`).
+    pub fn from_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+        limits: wgpu::Limits,
+    ) -> Self {
         let uncaptured = Arc::new(Mutex::new(Vec::new()));
         let sink = uncaptured.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
@@ -262,13 +273,13 @@ impl GpuContext {
                 v.push(e.to_string());
             }
         }));
-        Ok(Self {
+        Self {
             device,
             queue,
             info,
             limits,
             uncaptured,
-        })
+        }
     }
 
     /// One context per process and kind (hardware only, or software allowed), made on first use:
