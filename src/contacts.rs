@@ -199,60 +199,99 @@ impl Props {
     ) -> Result<(Props, Vec<RigidBodyHandle>), String> {
         let mut physics = PhysicsWorld::new();
         physics.gravity = gravity.as_vec3();
+        let mut props = Props {
+            physics,
+            moving: false,
+            dynamic: false,
+            paths: Vec::new(),
+            driven: Vec::new(),
+            time: 0.0,
+            substep: 0,
+            substeps: 1,
+            stage: ContactStage::new(contact),
+        };
         let mut handles = Vec::with_capacity(bodies.len());
-        let mut paths = Vec::new();
         for (i, b) in bodies.iter().enumerate() {
-            let (position, rotation) = match b.path.first() {
-                Some(k) => (k.position, k.rotation),
-                None => (b.position, b.rotation),
-            };
-            let builder = match b.kind {
-                BodyKind::Fixed => RigidBodyBuilder::fixed(),
-                BodyKind::Dynamic => RigidBodyBuilder::dynamic(),
-                BodyKind::Kinematic => RigidBodyBuilder::kinematic_velocity_based(),
-                BodyKind::KinematicPosition => RigidBodyBuilder::kinematic_position_based(),
-            }
-            .translation(v3(position))
-            .rotation(v3(rotation))
-            .linvel(v3(b.velocity))
-            .angvel(v3(b.angular_velocity))
-            .linear_damping(b.linear_damping as f32)
-            .angular_damping(b.angular_damping as f32);
-            let body = physics.bodies.insert(builder);
-            let mut co = collider_of(&b.shape)
-                .map_err(|e| format!("bodies[{i}].shape: {e}"))?
-                .friction(b.friction as f32)
-                .restitution(b.restitution as f32);
-            co = match (b.mass, b.density) {
-                (Some(m), _) => co.mass(m as f32),
-                (None, Some(d)) => co.density(d as f32),
-                (None, None) => co.density(1000.0),
-            };
-            let collider = physics
-                .colliders
-                .insert_with_parent(co, body, &mut physics.bodies);
-            world.spawn((RigidProp { body, collider },));
-            handles.push(body);
-            if !b.path.is_empty() {
-                paths.push((body, b.path.clone()));
-            }
+            let prop = props
+                .add_body(b, world)
+                .map_err(|e| format!("bodies[{i}].{e}"))?;
+            handles.push(prop.body);
         }
-        let moving = bodies.iter().any(|b| b.kind != BodyKind::Fixed);
-        let dynamic = bodies.iter().any(|b| b.kind == BodyKind::Dynamic);
-        Ok((
-            Props {
-                physics,
-                moving,
-                dynamic,
-                paths,
-                driven: Vec::new(),
-                time: 0.0,
-                substep: 0,
-                substeps: 1,
-                stage: ContactStage::new(contact),
-            },
-            handles,
-        ))
+        Ok((props, handles))
+    }
+
+    /// Adds a body (validated like a scene's) to the rapier world and spawns its
+    /// [`RigidProp`] entity into `world`.
+    pub fn add_body(&mut self, b: &BodyDef, world: &mut World) -> Result<RigidProp, String> {
+        let physics = &mut self.physics;
+        let (position, rotation) = match b.path.first() {
+            Some(k) => (k.position, k.rotation),
+            None => (b.position, b.rotation),
+        };
+        let builder = match b.kind {
+            BodyKind::Fixed => RigidBodyBuilder::fixed(),
+            BodyKind::Dynamic => RigidBodyBuilder::dynamic(),
+            BodyKind::Kinematic => RigidBodyBuilder::kinematic_velocity_based(),
+            BodyKind::KinematicPosition => RigidBodyBuilder::kinematic_position_based(),
+        }
+        .translation(v3(position))
+        .rotation(v3(rotation))
+        .linvel(v3(b.velocity))
+        .angvel(v3(b.angular_velocity))
+        .linear_damping(b.linear_damping as f32)
+        .angular_damping(b.angular_damping as f32);
+        let mut co = collider_of(&b.shape)
+            .map_err(|e| format!("shape: {e}"))?
+            .friction(b.friction as f32)
+            .restitution(b.restitution as f32);
+        co = match (b.mass, b.density) {
+            (Some(m), _) => co.mass(m as f32),
+            (None, Some(d)) => co.density(d as f32),
+            (None, None) => co.density(1000.0),
+        };
+        let body = physics.bodies.insert(builder);
+        let collider = physics
+            .colliders
+            .insert_with_parent(co, body, &mut physics.bodies);
+        let prop = RigidProp { body, collider };
+        world.spawn((prop,));
+        if !b.path.is_empty() {
+            self.paths.push((body, b.path.clone()));
+        }
+        self.moving |= b.kind != BodyKind::Fixed;
+        self.dynamic |= b.kind == BodyKind::Dynamic;
+        Ok(prop)
+    }
+
+    /// Removes a body, its collider, its [`RigidProp`] entity and the attachments of particles
+    /// to it (those particles go free). False when the body is not in this world.
+    pub fn remove_body(&mut self, body: RigidBodyHandle, world: &mut World) -> bool {
+        if self.physics.remove_body(body).is_none() {
+            return false;
+        }
+        self.paths.retain(|(h, _)| *h != body);
+        let doomed: Vec<Entity> = world
+            .query::<(Entity, &RigidProp)>()
+            .iter()
+            .filter(|(_, p)| p.body == body)
+            .map(|(e, _)| e)
+            .collect();
+        for e in doomed {
+            let _ = world.despawn(e);
+        }
+        let attached: Vec<Entity> = world
+            .query::<(Entity, &Attachment)>()
+            .iter()
+            .filter(|(_, a)| a.body == body)
+            .map(|(e, _)| e)
+            .collect();
+        for e in attached {
+            let _ = world.remove_one::<Attachment>(e);
+        }
+        let bodies = &self.physics.bodies;
+        self.moving = bodies.iter().any(|(_, b)| !b.is_fixed());
+        self.dynamic = bodies.iter().any(|(_, b)| b.is_dynamic());
+        true
     }
 
     /// After a gather: the attached particles' packed indices.

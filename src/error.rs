@@ -67,6 +67,12 @@ pub enum SimError {
     BadFrameTime(f64),
     #[error("substeps must be ≥ 1")]
     NoSubsteps,
+    #[error("no such cloth in this simulation (removed already?)")]
+    UnknownCloth,
+    #[error("no such body in this simulation (removed already?)")]
+    UnknownBody,
+    #[error("body: {0}")]
+    BadBody(String),
     #[error("no particle {index} (scene order) in this simulation")]
     NoParticle { index: usize },
     #[error("position must be finite, got {0}")]

@@ -57,7 +57,7 @@ pub use error::{Error, GpuError, SceneError, SimError};
 pub use integrate::Integrator;
 pub use scene::Scene;
 pub use schedule::{Stage, StepStats};
-pub use simulation::{Advance, Diagnostics, RenderView, SimConfig, Simulation};
+pub use simulation::{Advance, ClothId, Diagnostics, RenderView, SimConfig, Simulation};
 
 pub mod prelude {
     pub use crate::{

@@ -8,7 +8,7 @@ use hecs::{Entity, World};
 
 use crate::backend::Backend;
 use crate::buffers::Packed;
-use crate::components::Pin;
+use crate::components::{Pin, SceneIndex};
 use rapier3d::prelude::{ColliderSet, RigidBodySet};
 
 use crate::contacts::{ContactStage, ContactStats, Props};
@@ -112,7 +112,14 @@ pub struct Simulation {
     frame: Frame,
     /// Particles held by [`Simulation::grab`] that were free before.
     grabbed: Vec<Entity>,
+    /// The cloths as units: each one's particles, a range of scene indices.
+    cloths: Vec<(ClothId, std::ops::Range<u32>)>,
+    next_cloth: u32,
 }
+
+/// A cloth of the simulation (from its scene or added at run time), to remove it by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ClothId(u32);
 
 /// What [`Simulation::advance`] did with a frame's time.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -327,6 +334,8 @@ impl Simulation {
             solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
             dirty: true,
             grabbed: Vec::new(),
+            cloths: Vec::new(),
+            next_cloth: 0,
             choice: None,
             parallel: false,
             steps: 0,
@@ -352,6 +361,10 @@ impl Simulation {
         let built = scene.build();
         let mut sim = Self::with_props(built.world, built.config, built.props)?;
         sim.frame.triangles = built.triangles;
+        for range in built.cloths {
+            sim.cloths.push((ClothId(sim.next_cloth), range));
+            sim.next_cloth += 1;
+        }
         Ok(sim)
     }
 
@@ -652,6 +665,154 @@ impl Simulation {
             let _ = self.world.remove_one::<Pin>(entity);
             self.dirty = true;
         }
+        Ok(())
+    }
+
+    /// The cloths, each with its particles' range in scene order (see [`Self::positions`]).
+    pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
+        self.cloths
+            .iter()
+            .map(|(id, r)| (*id, r.start as usize..r.end as usize))
+    }
+
+    /// Adds a cloth, validated as a scene's would be, after every particle of the scene
+    /// (scene order); its triangles join [`Self::triangles`]. Re-gathers on the next step.
+    pub fn add_cloth(&mut self, cloth: &crate::scene::Cloth) -> Result<ClothId, Error> {
+        let mut check = Scene::new(self.config.dt);
+        check.cloths.push(cloth.clone());
+        let issues = check.validate();
+        if !issues.is_empty() {
+            return Err(crate::SceneError::Invalid {
+                path: "add_cloth".into(),
+                issues,
+            }
+            .into());
+        }
+        let first = self
+            .world
+            .query::<&SceneIndex>()
+            .iter()
+            .map(|i| i.0 + 1)
+            .max()
+            .unwrap_or(0);
+        let triangles = crate::scene::spawn_cloth(&mut self.world, first, cloth);
+        let end = first + cloth.resolution.0 * cloth.resolution.1;
+        self.frame.triangles.extend(triangles);
+        let id = ClothId(self.next_cloth);
+        self.next_cloth += 1;
+        self.cloths.push((id, first..end));
+        self.dirty = true;
+        Ok(id)
+    }
+
+    /// Removes a cloth: its particles, every spring touching them, their pins and attachments
+    /// and its triangles. Later particles move up in scene order to close the gap.
+    pub fn remove_cloth(&mut self, id: ClothId) -> Result<(), SimError> {
+        let k = self
+            .cloths
+            .iter()
+            .position(|(c, _)| *c == id)
+            .ok_or(SimError::UnknownCloth)?;
+        let (_, range) = self.cloths.remove(k);
+        let n = range.end - range.start;
+        let doomed: std::collections::HashSet<Entity> = self
+            .world
+            .query::<(Entity, &SceneIndex)>()
+            .iter()
+            .filter(|(_, i)| range.contains(&i.0))
+            .map(|(e, _)| e)
+            .collect();
+        let springs: Vec<Entity> = self
+            .world
+            .query::<(Entity, &crate::Spring)>()
+            .iter()
+            .filter(|(_, s)| doomed.contains(&s.a) || doomed.contains(&s.b))
+            .map(|(e, _)| e)
+            .collect();
+        for e in springs.into_iter().chain(doomed.iter().copied()) {
+            let _ = self.world.despawn(e);
+        }
+        self.grabbed.retain(|e| !doomed.contains(e));
+        for i in self.world.query_mut::<&mut SceneIndex>() {
+            if i.0 >= range.end {
+                i.0 -= n;
+            }
+        }
+        self.frame
+            .triangles
+            .retain(|t| !t.iter().any(|i| range.contains(i)));
+        for t in &mut self.frame.triangles {
+            for i in t.iter_mut() {
+                if *i >= range.end {
+                    *i -= n;
+                }
+            }
+        }
+        for (_, r) in &mut self.cloths {
+            if r.start >= range.end {
+                *r = r.start - n..r.end - n;
+            }
+        }
+        self.frame.prev.clear();
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Adds a rigid body, validated as a scene's would be. The first body of a simulation
+    /// without any brings the rapier world and the contact stage (default contact material,
+    /// see [`Self::set_contact_material`]).
+    pub fn add_body(
+        &mut self,
+        body: &crate::scene::props::BodyDef,
+    ) -> Result<crate::contacts::RigidProp, Error> {
+        let mut check = Scene::new(self.config.dt);
+        check.bodies.push(body.clone());
+        let issues = check.validate();
+        if !issues.is_empty() {
+            return Err(crate::SceneError::Invalid {
+                path: "add_body".into(),
+                issues,
+            }
+            .into());
+        }
+        if self.props.is_none() {
+            let (props, _) = Props::build(&[], self.contact, self.config.gravity, &mut self.world)
+                .map_err(|e| SimError::BadBody(e.to_string()))?;
+            self.props = Some(props);
+        }
+        let props = self.props.as_mut().ok_or(SimError::UnknownBody)?;
+        let prop = props
+            .add_body(body, &mut self.world)
+            .map_err(SimError::BadBody)?;
+        self.dirty = true;
+        Ok(prop)
+    }
+
+    /// Removes a body with its collider; particles attached to it go free.
+    pub fn remove_body(&mut self, prop: crate::contacts::RigidProp) -> Result<(), SimError> {
+        let props = self.props.as_mut().ok_or(SimError::UnknownBody)?;
+        if !props.remove_body(prop.body, &mut self.world) {
+            return Err(SimError::UnknownBody);
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Pins particle `index` (scene order) where it is. Re-gathers on the next step.
+    pub fn pin(&mut self, index: usize) -> Result<(), SimError> {
+        let e = self.particle_entity(index)?;
+        let _ = self.world.insert_one(e, Pin);
+        self.grabbed.retain(|g| *g != e);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Frees particle `index` (scene order) from its pin.
+    pub fn unpin(&mut self, index: usize) -> Result<(), SimError> {
+        let e = self.particle_entity(index)?;
+        let _ = self.world.remove_one::<Pin>(e);
+        self.grabbed.retain(|g| *g != e);
+        self.dirty = true;
         Ok(())
     }
 

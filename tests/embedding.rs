@@ -107,3 +107,165 @@ fn render_normals_are_the_surface_normals() {
         assert!((*n - want).length() < 0.05, "{n}");
     }
 }
+
+const TWO_CLOTHS: &str = r#"Scene(dt: 0.01, substeps: 4, cloths: [
+    (origin: (-2.0, 1.0, -0.5), size: (1.0, 1.0), resolution: (10, 10), plane: Horizontal,
+     mass: 0.2, structural: (frequency: 30.0, damping_ratio: 0.1), pins: [TopLeft, TopRight]),
+    (origin: (1.0, 1.0, -0.5), size: (1.0, 1.0), resolution: (8, 8), plane: Horizontal,
+     mass: 0.2, structural: (frequency: 30.0, damping_ratio: 0.1), pins: [TopLeft]),
+])"#;
+
+/// Removing one of two independent cloths mid-run leaves the other moving exactly as it would
+/// have alone; adding it back later gives it the scene's particles and triangles again.
+#[test]
+fn cloths_are_added_and_removed_as_units() {
+    let scene = Scene::parse(TWO_CLOTHS, "two").unwrap();
+    let mut both = Simulation::from_scene(&scene).unwrap();
+    let mut alone_scene = scene.clone();
+    let first = alone_scene.cloths.remove(0);
+    let mut alone = Simulation::from_scene(&alone_scene).unwrap();
+    let ids: Vec<_> = both.cloths().collect();
+    assert_eq!(ids.len(), 2);
+    assert_eq!((ids[0].1.clone(), ids[1].1.clone()), (0..100, 100..164));
+    for _ in 0..10 {
+        both.step().unwrap();
+    }
+    both.remove_cloth(ids[0].0).unwrap();
+    assert!(both.remove_cloth(ids[0].0).is_err(), "removed twice");
+    // The first cloth's 10 steps happened before the removal; the second cloth never saw it.
+    for _ in 0..10 {
+        alone.step().unwrap();
+    }
+    for _ in 0..20 {
+        both.step().unwrap();
+        alone.step().unwrap();
+    }
+    assert_eq!(both.positions().len(), 64);
+    assert_eq!(both.triangles(), alone.triangles());
+    let worst = both
+        .positions()
+        .iter()
+        .zip(alone.positions())
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-12,
+        "the remaining cloth moved differently: {worst:e} m"
+    );
+
+    // Back again: after the 64 particles, with its own triangles over them.
+    let id = both.add_cloth(&first).unwrap();
+    both.step().unwrap();
+    assert_eq!(both.positions().len(), 164);
+    let range = both.cloths().find(|c| c.0 == id).unwrap().1;
+    assert_eq!(range, 64..164);
+    assert_eq!(both.triangles().len(), 2 * 81 + 2 * 49);
+    assert!(both
+        .triangles()
+        .iter()
+        .skip(2 * 49)
+        .all(|t| t.iter().all(|&i| (64..164).contains(&(i as usize)))));
+    // Its pinned corner stays where the scene put it.
+    let corner = both.positions()[64];
+    assert!(
+        (corner - DVec3::new(-2.0, 1.0, -0.5)).length() < 1e-12,
+        "{corner}"
+    );
+}
+
+#[test]
+fn a_bad_cloth_or_body_added_at_run_time_is_a_located_error() {
+    let mut sim = cloth("");
+    let mut c = Scene::parse(TWO_CLOTHS, "two").unwrap().cloths[0].clone();
+    c.resolution = (1, 5);
+    let e = sim.add_cloth(&c).unwrap_err().to_string();
+    assert!(e.contains("cloths[0].resolution"), "{e}");
+    let body = Scene::parse(
+        "Scene(dt: 0.01, bodies: [(kind: Fixed, shape: Ball(radius: -1.0))])",
+        "b",
+    );
+    assert!(body.is_err(), "a negative radius must not parse");
+    let mut ok = Scene::parse(
+        "Scene(dt: 0.01, bodies: [(kind: Fixed, shape: Ball(radius: 0.2))])",
+        "b",
+    )
+    .unwrap()
+    .bodies
+    .remove(0);
+    ok.mass = Some(-2.0);
+    let e = sim.add_body(&ok).unwrap_err().to_string();
+    assert!(e.contains("bodies[0].mass"), "{e}");
+    // Nothing was added.
+    assert_eq!(sim.positions().len(), 144);
+    assert!(sim.props().is_none());
+}
+
+/// A ball put under a falling cloth at run time catches it (the contact stage starts with the
+/// first body); removing the ball lets it fall on.
+#[test]
+fn a_body_added_at_run_time_catches_the_cloth_and_its_removal_frees_it() {
+    let text = r#"Scene(dt: 0.01, substeps: 8, cloths: [
+        (origin: (-0.5, 1.0, -0.5), size: (1.0, 1.0), resolution: (16, 16), plane: Horizontal,
+         mass: 0.2, structural: (frequency: 30.0, damping_ratio: 0.1),
+         shear: Some((frequency: 30.0, damping_ratio: 0.1)))])"#;
+    let mut sim = Simulation::from_scene(&Scene::parse(text, "fall").unwrap()).unwrap();
+    assert!(sim.props().is_none(), "no bodies, no rapier world");
+    let ball = Scene::parse(
+        "Scene(dt: 0.01, bodies: [(kind: Fixed, shape: Ball(radius: 0.3), position: (0.0, 0.3, 0.0))])",
+        "b",
+    )
+    .unwrap()
+    .bodies
+    .remove(0);
+    let prop = sim.add_body(&ball).unwrap();
+    let thickness = sim.props().unwrap().contact().thickness;
+    for _ in 0..150 {
+        sim.step().unwrap();
+        let deepest = sim
+            .positions()
+            .iter()
+            .map(|x| 0.3 - x.distance(DVec3::new(0.0, 0.3, 0.0)))
+            .fold(f64::MIN, f64::max);
+        assert!(
+            deepest < thickness,
+            "a particle is {deepest} m inside the ball"
+        );
+    }
+    let centre = |sim: &Simulation| sim.positions()[8 * 16 + 8].y;
+    assert!(
+        centre(&sim) > 0.6,
+        "the cloth's middle rests on the ball top: {}",
+        centre(&sim)
+    );
+    sim.remove_body(prop).unwrap();
+    assert!(sim.remove_body(prop).is_err(), "removed twice");
+    for _ in 0..40 {
+        sim.step().unwrap();
+    }
+    assert!(centre(&sim) < 0.3, "the cloth fell on: {}", centre(&sim));
+}
+
+#[test]
+fn grab_holds_a_particle_and_release_lets_it_go() {
+    let mut sim = cloth("substeps: 4,");
+    let target = DVec3::new(0.2, 1.5, 0.1);
+    sim.grab(70, target).unwrap();
+    for _ in 0..20 {
+        sim.step().unwrap();
+        assert_eq!(sim.positions()[70], target);
+    }
+    assert!(sim.grab(10_000, target).is_err());
+    assert!(sim.grab(70, DVec3::NAN).is_err());
+    sim.release(70).unwrap();
+    for _ in 0..20 {
+        sim.step().unwrap();
+    }
+    assert!(sim.positions()[70].y < 1.5 - 0.01, "released, it falls");
+    // A scene pin survives a grab and release.
+    sim.grab(0, DVec3::new(-0.5, 1.0, -0.5)).unwrap();
+    sim.release(0).unwrap();
+    for _ in 0..5 {
+        sim.step().unwrap();
+    }
+    assert_eq!(sim.positions()[0], DVec3::new(-0.5, 1.0, -0.5));
+}

@@ -17,6 +17,21 @@ pub struct BuiltScene {
     /// The cloths' triangles, as scene indices (counter-clockwise seen from the side the
     /// cloth's normal points to: +y for horizontal cloths, +z for vertical ones).
     pub triangles: Vec<[u32; 3]>,
+    /// Each cloth's particles, as a range of scene indices.
+    pub cloths: Vec<std::ops::Range<u32>>,
+}
+
+/// Spawns `cloth` into `world` with its particles numbered from scene index `first`; returns
+/// its triangles (scene indices). The cloth must have passed validation.
+pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Vec<[u32; 3]> {
+    let mut b = Builder {
+        world: std::mem::take(world),
+        next: first,
+        triangles: Vec::new(),
+    };
+    b.cloth(cloth);
+    *world = b.world;
+    b.triangles
 }
 
 impl SpringSpec {
@@ -206,8 +221,11 @@ impl Scene {
                 .unwrap_or_else(|| (DVec3::from(pb.position) - DVec3::from(pa.position)).length());
             b.spring(ids[s.a], ids[s.b], &s.spec(), (pa.mass, pb.mass), rest);
         }
+        let mut cloths = Vec::with_capacity(self.cloths.len());
         for c in &self.cloths {
+            let first = b.next;
             b.cloth(c);
+            cloths.push(first..b.next);
         }
         for r in &self.ropes {
             b.rope(r);
@@ -220,6 +238,7 @@ impl Scene {
         let props = self.build_props(&mut b.world);
         BuiltScene {
             props,
+            cloths,
             triangles: b.triangles,
             world: b.world,
             config: SimConfig {

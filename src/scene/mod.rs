@@ -14,6 +14,7 @@
 //! `damping_ratio` means `c = 2 ζ √(κ μ)`.
 
 mod build;
+pub use build::spawn_cloth;
 pub mod props;
 mod validate;
 
