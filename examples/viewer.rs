@@ -10,6 +10,7 @@
 //! title bar. Saving the RON file reloads the scene; a broken file keeps the running scene and
 //! shows the error in the title (and on stderr) instead of crashing.
 //!
+//! `--quit-after N` closes the window after N frames (a smoke test under a virtual display).
 //! `--headless N` needs no window: it drives the same controls through a scripted session of N
 //! frames (strain colours, a particle dragged and let go, pause and step, wireframe, a broken
 //! then fixed hot reload of a copy of the scene), renders offscreen and writes the last frame to
@@ -368,6 +369,9 @@ mod window {
         cursor: PhysicalPosition<f64>,
         last: Instant,
         failed: Option<String>,
+        /// Close after this many frames (a smoke test under a virtual display).
+        pub quit_after: Option<u32>,
+        frames: u32,
     }
 
     impl Viewer {
@@ -378,6 +382,8 @@ mod window {
                 cursor: PhysicalPosition::new(0.0, 0.0),
                 last: Instant::now(),
                 failed: None,
+                quit_after: None,
+                frames: 0,
             }
         }
 
@@ -511,6 +517,12 @@ mod window {
                 }
                 WindowEvent::RedrawRequested => {
                     self.redraw();
+                    self.frames += 1;
+                    if self.quit_after.is_some_and(|n| self.frames >= n) {
+                        println!("{} frames shown; {}", self.frames, self.app.title());
+                        el.exit();
+                        return;
+                    }
                     if let Some(g) = &self.gfx {
                         g.window.request_redraw();
                     }
@@ -563,10 +575,12 @@ fn main() -> std::process::ExitCode {
     let mut scene = PathBuf::from("scenes/drape_sphere.ron");
     let mut headless_frames = None;
     let mut out = PathBuf::from("target/viewer.png");
+    let mut quit_after = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--headless" => headless_frames = args.next().and_then(|n| n.parse::<u32>().ok()),
             "--out" => out = args.next().map(PathBuf::from).unwrap_or(out),
+            "--quit-after" => quit_after = args.next().and_then(|n| n.parse::<u32>().ok()),
             _ => scene = PathBuf::from(a),
         }
     }
@@ -576,6 +590,7 @@ fn main() -> std::process::ExitCode {
             let event_loop = winit::event_loop::EventLoop::new()
                 .map_err(|e| format!("no window system ({e}); `--headless N` runs without one"))?;
             let mut viewer = window::Viewer::new(app);
+            viewer.quit_after = quit_after;
             event_loop.run_app(&mut viewer).map_err(|e| e.to_string())?;
             viewer.failure().map_or(Ok(()), |e| Err(e.to_string()))
         }),
