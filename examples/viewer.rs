@@ -21,7 +21,7 @@ use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
 use glam::{Vec2, Vec3};
-use harmonic::render::{bounds, Camera, Offscreen, Renderer, Style};
+use harmonic::render::{Camera, Offscreen, Renderer, Style};
 use harmonic::{Scene, Simulation};
 
 /// The viewer's state and controls, apart from any window.
@@ -62,16 +62,10 @@ fn modified(path: &Path) -> Option<SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
 }
 
-fn framing(sim: &Simulation) -> Camera {
-    let (lo, hi) = bounds(sim);
-    let pad = 0.1 * (hi - lo);
-    Camera::framing(lo - pad, hi + pad)
-}
-
 impl App {
     fn new(path: PathBuf) -> Result<Self, String> {
         let sim = load(&path)?;
-        let home = framing(&sim);
+        let home = Camera::of(&sim, 0.1);
         Ok(Self {
             modified: modified(&path),
             path,

@@ -270,23 +270,22 @@ impl Props {
             return false;
         }
         self.paths.retain(|(h, _)| *h != body);
-        let doomed: Vec<Entity> = world
-            .query::<(Entity, &RigidProp)>()
+        // The body's own entity, and the particles attached to it.
+        let mine: Vec<(Entity, bool)> = world
+            .query::<(Entity, Option<&RigidProp>, Option<&Attachment>)>()
             .iter()
-            .filter(|(_, p)| p.body == body)
-            .map(|(e, _)| e)
+            .filter_map(|(e, p, a)| match (p, a) {
+                (Some(p), _) if p.body == body => Some((e, true)),
+                (_, Some(a)) if a.body == body => Some((e, false)),
+                _ => None,
+            })
             .collect();
-        for e in doomed {
-            let _ = world.despawn(e);
-        }
-        let attached: Vec<Entity> = world
-            .query::<(Entity, &Attachment)>()
-            .iter()
-            .filter(|(_, a)| a.body == body)
-            .map(|(e, _)| e)
-            .collect();
-        for e in attached {
-            let _ = world.remove_one::<Attachment>(e);
+        for (e, is_body) in mine {
+            if is_body {
+                let _ = world.despawn(e);
+            } else {
+                let _ = world.remove_one::<Attachment>(e);
+            }
         }
         let bodies = &self.physics.bodies;
         self.moving = bodies.iter().any(|(_, b)| !b.is_fixed());

@@ -66,6 +66,13 @@ impl Camera {
         }
     }
 
+    /// [`Self::framing`] of `sim`'s [`bounds`] grown by `margin` of their size on each side.
+    pub fn of(sim: &Simulation, margin: f32) -> Self {
+        let (lo, hi) = bounds(sim);
+        let pad = margin * (hi - lo);
+        Self::framing(lo - pad, hi + pad)
+    }
+
     pub fn eye(&self) -> Vec3 {
         let (sy, cy) = self.yaw.sin_cos();
         let (sp, cp) = self.pitch.sin_cos();

@@ -275,6 +275,21 @@ fn gpu_solver(config: &SimConfig) -> Result<Option<crate::gpu::GpuSolver>, SimEr
 
 /// Contacts run on the CPU. Under `auto` a scene with props runs there entirely; under `gpu`
 /// the springs run on the GPU and the state makes a round trip every substep for the contacts.
+/// A part added at run time, checked as the one entry of an otherwise empty scene, so its
+/// errors name it as a scene file's would (`add_cloth: cloths[0].resolution: ...`).
+fn valid_part(scene: &Scene, what: &str) -> Result<(), Error> {
+    let issues = scene.validate();
+    if issues.is_empty() {
+        Ok(())
+    } else {
+        Err(crate::SceneError::Invalid {
+            path: what.into(),
+            issues,
+        }
+        .into())
+    }
+}
+
 fn props_backend(asked: Backend) -> Backend {
     match asked {
         Backend::Auto => Backend::Cpu,
@@ -680,14 +695,7 @@ impl Simulation {
     pub fn add_cloth(&mut self, cloth: &crate::scene::Cloth) -> Result<ClothId, Error> {
         let mut check = Scene::new(self.config.dt);
         check.cloths.push(cloth.clone());
-        let issues = check.validate();
-        if !issues.is_empty() {
-            return Err(crate::SceneError::Invalid {
-                path: "add_cloth".into(),
-                issues,
-            }
-            .into());
-        }
+        valid_part(&check, "add_cloth")?;
         let first = self
             .world
             .query::<&SceneIndex>()
@@ -767,14 +775,7 @@ impl Simulation {
     ) -> Result<crate::contacts::RigidProp, Error> {
         let mut check = Scene::new(self.config.dt);
         check.bodies.push(body.clone());
-        let issues = check.validate();
-        if !issues.is_empty() {
-            return Err(crate::SceneError::Invalid {
-                path: "add_body".into(),
-                issues,
-            }
-            .into());
-        }
+        valid_part(&check, "add_body")?;
         if self.props.is_none() {
             let (props, _) = Props::build(&[], self.contact, self.config.gravity, &mut self.world)
                 .map_err(|e| SimError::BadBody(e.to_string()))?;

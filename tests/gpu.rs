@@ -180,18 +180,7 @@ fn pod_mirrors_match_the_wgsl_layouts() {
 
 /// The software-or-hardware context, or `None` (test skipped) when no adapter exists at all.
 fn context() -> Option<Arc<GpuContext>> {
-    match GpuContext::shared(true) {
-        Ok(ctx) => Some(ctx),
-        Err(e) => {
-            assert!(
-                std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
-                "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
-            );
-            assert_eq!(e, GpuError::NoAdapter, "only a missing adapter may skip");
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
+    common::gpu_or_skip(GpuContext::shared(true))
 }
 
 /// A random blob of particles and springs: masses over three decades, about a tenth pinned,

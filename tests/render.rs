@@ -5,26 +5,16 @@
 //! (CI sets it: it has Mesa's lavapipe).
 #![cfg(feature = "gpu")]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use harmonic::prelude::*;
-use harmonic::render::{bounds, Camera, Image, Offscreen, Style};
-use harmonic::GpuError;
+use harmonic::render::{Camera, Image, Offscreen, Style};
 
 fn offscreen(width: u32, height: u32) -> Option<Offscreen> {
-    match Offscreen::new(width, height) {
-        Ok(o) => Some(o),
-        Err(e) => {
-            assert!(
-                std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
-                "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
-            );
-            assert_eq!(e, GpuError::NoAdapter, "only a missing adapter may skip");
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
+    common::gpu_or_skip(Offscreen::new(width, height))
 }
 
 fn shipped_scenes() -> Vec<PathBuf> {
@@ -39,9 +29,7 @@ fn shipped_scenes() -> Vec<PathBuf> {
 }
 
 fn framed(sim: &Simulation) -> Camera {
-    let (lo, hi) = bounds(sim);
-    let pad = 0.05 * (hi - lo);
-    Camera::framing(lo - pad, hi + pad)
+    Camera::of(sim, 0.05)
 }
 
 #[test]

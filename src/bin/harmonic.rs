@@ -257,7 +257,7 @@ fn progress_bar(total: u64) -> Option<indicatif::ProgressBar> {
 
 #[cfg(feature = "gpu")]
 fn render(args: RenderArgs) -> Result<(), String> {
-    use harmonic::render::{bounds, Camera, Image, Offscreen, Style};
+    use harmonic::render::{Camera, Image, Offscreen, Style};
     let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|&v| v > 0);
     let (width, height) = match args.size.split_once(['x', 'X']) {
         Some((w, h)) => parse(w).zip(parse(h)),
@@ -284,12 +284,7 @@ fn render(args: RenderArgs) -> Result<(), String> {
     );
     // The camera frames the scene as it starts (with a margin); it follows the scene's centre
     // (a walking character) and backs off when the scene spreads, never closing in.
-    let frame = |sim: &Simulation| {
-        let (lo, hi) = bounds(sim);
-        let pad = 0.05 * (hi - lo);
-        Camera::framing(lo - pad, hi + pad)
-    };
-    let first = frame(&sim);
+    let first = Camera::of(&sim, 0.05);
     let style = Style {
         wireframe: args.wireframe,
         strain: args.strain,
@@ -312,7 +307,7 @@ fn render(args: RenderArgs) -> Result<(), String> {
                 b.set_position(done);
             }
         }
-        let now = frame(&sim);
+        let now = Camera::of(&sim, 0.05);
         let camera = Camera {
             distance: now.distance.max(first.distance),
             ..now

@@ -91,6 +91,27 @@ impl Rng {
 }
 
 /// Seed from the clock unless `HARMONIC_SEED` is set; printed so a failure can be replayed.
+/// The GPU tests' skip rule: `Ok(v)` is `Some(v)`; an error skips the test (`None`) only when
+/// no adapter exists at all and `HARMONIC_REQUIRE_GPU` is not set (CI sets it).
+pub fn gpu_or_skip<T>(r: Result<T, harmonic::GpuError>) -> Option<T> {
+    match r {
+        Ok(v) => Some(v),
+        Err(e) => {
+            assert!(
+                std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
+                "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
+            );
+            assert_eq!(
+                e,
+                harmonic::GpuError::NoAdapter,
+                "only a missing adapter may skip"
+            );
+            eprintln!("skipped: {e}");
+            None
+        }
+    }
+}
+
 pub fn seed() -> u64 {
     let seed = std::env::var("HARMONIC_SEED")
         .ok()
