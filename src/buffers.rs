@@ -112,6 +112,10 @@ impl Colouring {
                 continue;
             }
             let (a, b) = (s.a as usize * words, s.b as usize * words);
+            #[allow(
+                clippy::expect_used,
+                reason = "a spring meets at most 2·max_deg − 2 others"
+            )]
             let c = (0..words)
                 .find_map(|w| {
                     let free = !(used[a + w] | used[b + w]);

@@ -30,6 +30,9 @@
 //! assert!((sag - 9.81 / 1000.0).abs() < 1e-3, "{sag}");
 //! ```
 
+// Library code returns errors; each remaining unwrap/expect names the invariant it relies on.
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+
 pub mod accuracy;
 pub mod backend;
 pub mod bench;

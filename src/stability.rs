@@ -184,6 +184,10 @@ pub fn near_rigid(stiffness: f64, zeta: f64) -> Scene {
     s
 }
 
+#[allow(
+    clippy::expect_used,
+    reason = "the suite builds its own scenes, never user input"
+)]
 fn pack(scene: &Scene) -> Packed {
     Packed::gather(&scene.build().world).expect("generated scenes are consistent")
 }
