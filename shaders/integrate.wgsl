@@ -105,6 +105,25 @@ fn spring_response(e: vec2<u32>, c: Coef, va: vec3<f32>, vb: vec3<f32>) -> vec4<
     return vec4<f32>(n, phi);
 }
 
+// Whether every component is finite: exponent bits not all set (WGSL has no isnan).
+fn finite3(v: vec3<f32>) -> bool {
+    let inf = vec3<u32>(0x7f800000u);
+    return all((bitcast<vec3<u32>>(v) & inf) != inf);
+}
+
+// Mirrors integrate::guard (the quarantine): a finite change passes; a non-finite one from
+// finite ends becomes NaN, marking both ends; one from an end already non-finite is dropped.
+fn guard(dv: vec3<f32>, e: vec2<u32>, va: vec3<f32>, vb: vec3<f32>) -> vec3<f32> {
+    if finite3(dv) {
+        return dv;
+    }
+    if finite3(pos[e.x].hi.xyz) && finite3(pos[e.y].hi.xyz) && finite3(va) && finite3(vb) {
+        // A NaN made at run time (params.one is 1.0): a constant NaN is a shader error.
+        return vec3<f32>(bitcast<f32>(0x7fc00000u ^ (bitcast<u32>(params.one) ^ 0x3f800000u)));
+    }
+    return vec3<f32>(0.0);
+}
+
 // Mirrors integrate::spring_pass: each spring writes its relative velocity change φ n.
 @compute @workgroup_size(WORKGROUP)
 fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
@@ -120,7 +139,7 @@ fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
         vb = vel[e.y].xyz;
     }
     let r = spring_response(e, coefs[k], va, vb);
-    sdv[k] = vec4<f32>(r.w * r.xyz, 0.0);
+    sdv[k] = vec4<f32>(guard(r.w * r.xyz, e, va, vb), 0.0);
 }
 
 // Mirrors integrate::particle_pass: each particle gathers its springs' changes and moves.
@@ -172,7 +191,7 @@ fn sweep_colour(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workg
     let va = vel[e.x];
     let vb = vel[e.y];
     let r = spring_response(e, c, va.xyz, vb.xyz);
-    let dv = r.w * r.xyz;
+    let dv = guard(r.w * r.xyz, e, va.xyz, vb.xyz);
     vel[e.x] = vec4<f32>(va.xyz - c.wa * dv, va.w);
     vel[e.y] = vec4<f32>(vb.xyz + (1.0 - c.wa) * dv, vb.w);
 }

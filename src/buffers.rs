@@ -192,6 +192,16 @@ impl Packed {
         let max_id = rows.iter().map(|r| r.1).max().map_or(0, |m| m as usize + 1);
         let mut index_of = vec![u32::MAX; max_id];
         for (i, (_, id, e, p, pinned)) in rows.into_iter().enumerate() {
+            // Components set through the World get the checks a scene file gets. A non-finite
+            // velocity is not refused: the step quarantines the particle instead.
+            let bad = |what: String| SimError::BadParticle { particle: e, what };
+            if !p.position.is_finite() {
+                return Err(bad(format!("position must be finite, got {}", p.position)));
+            }
+            let mass_ok = p.mass.is_finite() && p.mass > 0.0;
+            if !(pinned || mass_ok) {
+                return Err(bad(format!("mass must be finite and > 0, got {}", p.mass)));
+            }
             index_of[id as usize] = i as u32;
             packed.entities.push(e);
             packed.x.push(p.position);
@@ -220,6 +230,28 @@ impl Packed {
         let mut out = Vec::with_capacity(springs.len());
         for (e, s) in &springs {
             let (a, b) = (lookup(*e, s.a)?, lookup(*e, s.b)?);
+            let bad = |what: String| SimError::BadSpring { spring: *e, what };
+            if a == b {
+                return Err(bad("both ends are the same particle".into()));
+            }
+            if !(s.rest_length.is_finite() && s.rest_length > 0.0) {
+                return Err(bad(format!(
+                    "rest length must be finite and > 0, got {}",
+                    s.rest_length
+                )));
+            }
+            if !(s.stiffness.is_finite() && s.stiffness >= 0.0) {
+                return Err(bad(format!(
+                    "stiffness must be finite and ≥ 0, got {}",
+                    s.stiffness
+                )));
+            }
+            if !(s.damping.is_finite() && s.damping >= 0.0) {
+                return Err(bad(format!(
+                    "damping must be finite and ≥ 0, got {}",
+                    s.damping
+                )));
+            }
             let (ma, mb) = (packed.mass[a as usize], packed.mass[b as usize]);
             let mu = reduced_mass(ma, mb);
             let (wa, wb) = if mu.is_finite() {

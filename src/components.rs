@@ -17,6 +17,18 @@ pub struct Particle {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Pin;
 
+/// A particle whose position or velocity went non-finite in a step (a degenerate spring, an
+/// overflowing stiffness, a NaN set from outside): the step put it back at its last finite
+/// position, at rest, and pinned it, so nothing spreads from it. See
+/// [`crate::Simulation::quarantined`] and [`crate::Simulation::release_quarantine`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Quarantined {
+    /// Frames completed before the one that found it.
+    pub step: u64,
+    /// Whether it was pinned before, so a release leaves it pinned.
+    pub was_pinned: bool,
+}
+
 /// A spring between two particle entities, force `−κ δ − c δ̇` along its axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spring {

@@ -75,8 +75,16 @@ pub enum SimError {
     BadBody(String),
     #[error("no particle {index} (scene order) in this simulation")]
     NoParticle { index: usize },
+    #[error("particle {index} (scene order) is not in quarantine")]
+    NotQuarantined { index: usize },
     #[error("position must be finite, got {0}")]
     BadPosition(glam::DVec3),
+    #[error("invalid scene: {}", join_issues(.0))]
+    InvalidScene(Vec<Issue>),
+    #[error("particle {particle:?}: {what}")]
+    BadParticle { particle: Entity, what: String },
+    #[error("spring {spring:?}: {what}")]
+    BadSpring { spring: Entity, what: String },
     #[error("spring {spring:?} refers to {end:?}, which is not a particle")]
     DanglingSpring { spring: Entity, end: Entity },
     #[error(
@@ -123,6 +131,14 @@ pub enum Error {
     Scene(#[from] SceneError),
     #[error(transparent)]
     Sim(#[from] SimError),
+}
+
+fn join_issues(issues: &[Issue]) -> String {
+    issues
+        .iter()
+        .map(|i| i.to_string())
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 fn known_integrators() -> String {

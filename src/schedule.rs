@@ -38,6 +38,9 @@ pub struct StepStats {
     /// Whether this frame re-gathered the World.
     pub gathered: bool,
     pub substeps: u32,
+    /// Particles this frame found non-finite and quarantined (frozen at their last finite
+    /// position; [`crate::Simulation::quarantined`] lists them all).
+    pub quarantined: usize,
 }
 
 impl StepStats {

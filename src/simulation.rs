@@ -8,7 +8,7 @@ use hecs::{Entity, World};
 
 use crate::backend::Backend;
 use crate::buffers::Packed;
-use crate::components::{Pin, SceneIndex};
+use crate::components::{Pin, Quarantined, SceneIndex};
 use rapier3d::prelude::{ColliderSet, RigidBodySet};
 
 use crate::contacts::{ContactStage, ContactStats, Props};
@@ -16,7 +16,7 @@ use crate::error::{Error, SimError};
 use crate::integrate::{Integrator, Solver};
 use crate::metrics;
 use crate::scene::props::ContactDef;
-use crate::scene::Scene;
+use crate::scene::{Limits, Scene};
 use crate::schedule::StepStats;
 use crate::step_control::{self, StepChoice};
 
@@ -77,9 +77,11 @@ pub struct Diagnostics {
     pub max_strain: f64,
     /// `h/h_c` of the stiffest spring (`h_c = π/ω0`).
     pub step_ratio: f64,
-    /// Particles whose position or velocity is not finite (a step that produces one fails, so
-    /// this is 0 unless the state was set from outside).
+    /// Particles whose position or velocity is not finite: 0 after every step, which
+    /// quarantines such particles (non-zero only for a state set from outside since).
     pub non_finite: usize,
+    /// Particles in quarantine ([`Simulation::quarantined`]).
+    pub quarantined: usize,
 }
 
 /// A mass-spring simulation over a hecs World.
@@ -115,6 +117,32 @@ pub struct Simulation {
     /// The cloths as units: each one's particles, a range of scene indices.
     cloths: Vec<(ClothId, std::ops::Range<u32>)>,
     next_cloth: u32,
+    /// Particles found non-finite during the current frame (packed indices, may repeat).
+    contained: Vec<usize>,
+    /// Particles quarantined since the last frame's statistics.
+    newly_quarantined: usize,
+}
+
+/// The quarantine's check, after every substep (and after a gather, for state set from
+/// outside): each particle with a non-finite position or velocity goes back to its position in
+/// `world` (the last finite frame) at rest, before any spring reads it again, and is recorded
+/// in `found`. One parallel read of the state when nothing is wrong.
+fn contain(packed: &mut Packed, world: &World, found: &mut Vec<usize>) {
+    let bad = |x: &DVec3, v: &DVec3| !(x.is_finite() && v.is_finite());
+    if !crate::integrate::par::any2(&packed.x, &packed.v, bad) {
+        return;
+    }
+    for i in 0..packed.particle_count() {
+        if bad(&packed.x[i], &packed.v[i]) {
+            // Gather refuses non-finite positions and scatter writes only finite ones, so the
+            // World's position is finite; the origin is only a last resort.
+            packed.x[i] = world
+                .get::<&crate::components::Particle>(packed.entities[i])
+                .map_or(DVec3::ZERO, |p| p.position);
+            packed.v[i] = DVec3::ZERO;
+            found.push(i);
+        }
+    }
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -351,6 +379,8 @@ impl Simulation {
             grabbed: Vec::new(),
             cloths: Vec::new(),
             next_cloth: 0,
+            contained: Vec::new(),
+            newly_quarantined: 0,
             choice: None,
             parallel: false,
             steps: 0,
@@ -371,8 +401,19 @@ impl Simulation {
         Ok(sim)
     }
 
-    /// The scene's World, settings, bodies and cloth triangles.
+    /// The scene's World, settings, bodies and cloth triangles. The scene is validated first
+    /// (within the default [`Limits`]), so one built in code gets the same located errors as a
+    /// file.
     pub fn from_scene(scene: &Scene) -> Result<Self, SimError> {
+        Self::from_scene_with(scene, &Limits::DEFAULT)
+    }
+
+    /// As [`Self::from_scene`], within `limits`.
+    pub fn from_scene_with(scene: &Scene, limits: &Limits) -> Result<Self, SimError> {
+        let issues = scene.validate_with(limits);
+        if !issues.is_empty() {
+            return Err(SimError::InvalidScene(issues));
+        }
         let built = scene.build();
         let mut sim = Self::with_props(built.world, built.config, built.props)?;
         sim.frame.triangles = built.triangles;
@@ -521,6 +562,7 @@ impl Simulation {
     ) -> Result<&StepStats, SimError> {
         let t0 = Instant::now();
         let gathered = self.dirty;
+        self.contained.clear();
         if self.dirty {
             self.gather()?;
         }
@@ -543,14 +585,18 @@ impl Simulation {
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {
             match coupling.as_mut() {
+                // On the device the quarantine checks the state where it comes back: once per
+                // frame when the substeps go in one submit.
                 None => {
                     // Every substep in one submit; the state comes back once, for the scatter.
                     gpu.run(substeps)?;
                     gpu.read_back(&mut self.packed)?;
+                    contain(&mut self.packed, &self.world, &mut self.contained);
                 }
                 Some(Coupling::Own(p)) if gpu.contacts().is_some() => {
                     device_frame(gpu, p, &mut self.device_scratch, substeps, h, &mut contacts)?;
                     gpu.read_back(&mut self.packed)?;
+                    contain(&mut self.packed, &self.world, &mut self.contained);
                 }
                 Some(c) => {
                     // Contacts run on the CPU: the state goes back and forth every substep.
@@ -561,6 +607,7 @@ impl Simulation {
                         let t = Instant::now();
                         c.substep(&mut self.packed, h, k);
                         contacts += t.elapsed();
+                        contain(&mut self.packed, &self.world, &mut self.contained);
                         gpu.write_state(&self.packed);
                     }
                 }
@@ -568,18 +615,22 @@ impl Simulation {
             return self.finish_frame(t0, t1, gathered, contacts);
         }
         let (solver, packed) = (&mut self.solver, &mut self.packed);
+        let (world, found) = (&self.world, &mut self.contained);
         let contacts_time = &mut contacts;
         let mut integrate = move || {
             (1..=substeps).try_for_each(|k| {
-                let Some(c) = coupling.as_mut() else {
-                    return solver.substep(packed, h);
-                };
-                c.begin_substep(packed);
-                solver.substep(packed, h)?;
-                let t = Instant::now();
-                c.substep(packed, h, k);
-                *contacts_time += t.elapsed();
-                Ok(())
+                match coupling.as_mut() {
+                    None => solver.substep(packed, h)?,
+                    Some(c) => {
+                        c.begin_substep(packed);
+                        solver.substep(packed, h)?;
+                        let t = Instant::now();
+                        c.substep(packed, h, k);
+                        *contacts_time += t.elapsed();
+                    }
+                }
+                contain(packed, world, found);
+                Ok::<(), SimError>(())
             })
         };
         if self.parallel {
@@ -601,8 +652,10 @@ impl Simulation {
         contacts: Duration,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
+        self.quarantine();
         self.steps += 1;
         self.time += self.config.dt;
+        let quarantined = std::mem::take(&mut self.newly_quarantined);
         if let Some(particle) = metrics::first_non_finite(&self.packed) {
             return Err(SimError::NonFinite {
                 step: self.steps,
@@ -619,12 +672,88 @@ impl Simulation {
             scatter: t3 - t2,
             gathered,
             substeps: self.config.substeps,
+            quarantined,
         };
         Ok(&self.stats)
     }
 
+    /// Pins the particles this frame contained and marks them [`Quarantined`]; their state is
+    /// already restored. Re-gathers on the next step, so they stay frozen from then on.
+    fn quarantine(&mut self) -> usize {
+        if self.contained.is_empty() {
+            return 0;
+        }
+        self.contained.sort_unstable();
+        self.contained.dedup();
+        for &i in &self.contained {
+            let e = self.packed.entities[i];
+            let was_pinned = self.packed.inv_mass[i] == 0.0;
+            let q = Quarantined {
+                step: self.steps,
+                was_pinned,
+            };
+            let _ = self.world.insert(e, (Pin, q));
+            // At rest where it was put back, so a release starts it from there.
+            if let Ok(mut p) = self.world.get::<&mut crate::components::Particle>(e) {
+                p.position = self.packed.x[i];
+                p.velocity = DVec3::ZERO;
+            }
+            self.grabbed.retain(|g| *g != e);
+        }
+        self.dirty = true;
+        let n = self.contained.len();
+        self.contained.clear();
+        self.newly_quarantined += n;
+        n
+    }
+
+    /// Particles in quarantine (scene order): each went non-finite in a step and was frozen at
+    /// its last finite position. A game may log them, hide them, or release them.
+    pub fn quarantined(&self) -> Vec<(usize, Quarantined)> {
+        let mut out: Vec<_> = self
+            .world
+            .query::<(Entity, &Quarantined)>()
+            .iter()
+            .filter_map(|(e, q)| self.packed.index_of(e).map(|i| (i, *q)))
+            .collect();
+        out.sort_unstable_by_key(|(i, _)| *i);
+        out
+    }
+
+    /// Lets a quarantined particle (scene order) move again, unpinned unless it was pinned
+    /// before; whatever made it non-finite should be fixed first, or it comes straight back.
+    pub fn release_quarantine(&mut self, index: usize) -> Result<(), SimError> {
+        let e = self.particle_entity(index)?;
+        let q = self
+            .world
+            .remove_one::<Quarantined>(e)
+            .map_err(|_| SimError::NotQuarantined { index })?;
+        if !q.was_pinned {
+            let _ = self.world.remove_one::<Pin>(e);
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
     fn gather(&mut self) -> Result<(), SimError> {
         self.packed = Packed::gather(&self.world)?;
+        // Frozen before anything reads them: particles with a velocity set non-finite from
+        // outside, and the free ends of springs beyond f32's range (the device's precision,
+        // where they turn non-finite at once; the CPU does the same so the back ends agree).
+        let over = |v: f64| v > f32::MAX as f64;
+        let p = &self.packed;
+        self.contained.extend(
+            p.springs
+                .iter()
+                .filter(|s| over(s.stiffness) || over(s.damping))
+                .flat_map(|s| [s.a as usize, s.b as usize])
+                .filter(|&i| p.inv_mass[i] != 0.0),
+        );
+        contain(&mut self.packed, &self.world, &mut self.contained);
+        if !self.contained.is_empty() {
+            self.quarantine();
+            self.packed = Packed::gather(&self.world)?;
+        }
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.choose_substeps();
@@ -1006,6 +1135,7 @@ impl Simulation {
             step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
                 .map_or(0.0, |r| r.0),
             non_finite: metrics::non_finite_count(&self.packed),
+            quarantined: self.world.query::<&Quarantined>().iter().count(),
         }
     }
 }

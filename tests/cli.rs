@@ -75,8 +75,12 @@ fn run_reports_a_blow_up_with_a_non_zero_exit() {
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("state went non-finite at step"), "{stderr}");
-    assert!(String::from_utf8_lossy(&out.stdout).contains("non-finite: yes"));
+    assert!(
+        stderr.contains("went non-finite and were quarantined"),
+        "{stderr}"
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("particle(s) quarantined"), "{stdout}");
     let auto = harmonic(&["run", "scenes/paper_fig1_near_rigid.ron", "--steps", "60"]);
     let stdout = String::from_utf8_lossy(&auto.stdout);
     assert!(auto.status.success(), "{stdout}");

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
+use harmonic::scene::Limits;
 use harmonic::{bench, stability, Backend, Integrator, Scene, SimError, Simulation};
 
 #[derive(Parser)]
@@ -95,9 +96,35 @@ enum Command {
     Render(RenderArgs),
 }
 
+/// How much a scene may ask for (`harmonic::scene::Limits`), checked before building it.
+#[derive(clap::Args)]
+struct LimitArgs {
+    /// Refuse scenes with more particles than this.
+    #[arg(long, default_value_t = Limits::DEFAULT.max_particles)]
+    max_particles: u64,
+    /// Refuse scenes with more springs than this.
+    #[arg(long, default_value_t = Limits::DEFAULT.max_springs)]
+    max_springs: u64,
+    /// Refuse scenes fixing more substeps per frame than this.
+    #[arg(long, default_value_t = Limits::DEFAULT.max_substeps)]
+    max_substeps: u32,
+}
+
+impl LimitArgs {
+    fn limits(&self) -> Limits {
+        Limits {
+            max_particles: self.max_particles,
+            max_springs: self.max_springs,
+            max_substeps: self.max_substeps,
+        }
+    }
+}
+
 #[derive(clap::Args)]
 struct RenderArgs {
     scene: PathBuf,
+    #[command(flatten)]
+    limits: LimitArgs,
     /// Folder for the pictures (`<scene>_<k>.png`, and `<scene>_sheet.png` with --sheet).
     #[arg(long, default_value = "render-out")]
     out: PathBuf,
@@ -127,6 +154,8 @@ struct RenderArgs {
 #[derive(clap::Args)]
 struct RunArgs {
     scene: PathBuf,
+    #[command(flatten)]
+    limits: LimitArgs,
     /// Simulated seconds (default: the scene's `seconds`, else 1).
     #[arg(long, conflicts_with = "steps")]
     seconds: Option<f64>,
@@ -267,8 +296,9 @@ fn render(args: RenderArgs) -> Result<(), String> {
     if args.frames == 0 {
         return Err("--frames must be ≥ 1".into());
     }
-    let scene = Scene::load(&args.scene).map_err(|e| e.to_string())?;
-    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
+    let limits = args.limits.limits();
+    let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::from_scene_with(&scene, &limits).map_err(|e| e.to_string())?;
     let seconds = args.seconds.or(scene.seconds).unwrap_or(1.0);
     if !(seconds.is_finite() && seconds >= 0.0) {
         return Err(format!("--seconds {seconds}: expected a finite time ≥ 0"));
@@ -425,7 +455,7 @@ fn check(paths: &[PathBuf]) -> Result<(), String> {
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
-    let scene = Scene::load(&args.scene).map_err(|e| e.to_string())?;
+    let scene = Scene::load_with(&args.scene, &args.limits.limits()).map_err(|e| e.to_string())?;
     let built = scene.build();
     let mut config = built.config;
     if let Some(dt) = args.dt {
@@ -540,10 +570,17 @@ fn run(args: RunArgs) -> Result<(), String> {
     let bar = progress_bar(steps);
     let t0 = Instant::now();
     let mut failure = None;
+    let mut first_quarantine = None;
     for step in 1..=steps {
-        if let Err(e) = sim.step() {
-            failure = Some(e);
-            break;
+        match sim.step() {
+            Err(e) => {
+                failure = Some(e);
+                break;
+            }
+            Ok(s) if s.quarantined > 0 && first_quarantine.is_none() => {
+                first_quarantine = Some(step)
+            }
+            Ok(_) => {}
         }
         if let Some(b) = &bar {
             b.set_position(step);
@@ -595,16 +632,49 @@ fn run(args: RunArgs) -> Result<(), String> {
         "energy: start {:.6e} J, end {:.6e} J",
         start.energy, end.energy
     );
-    match failure {
-        None => {
-            println!("non-finite: none");
-            Ok(())
-        }
-        Some(e) => {
+    if let Some(bytes) = peak_rss() {
+        println!(
+            "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",
+            bytes as f64 / (1 << 20) as f64,
+        );
+    }
+    let quarantined = sim.quarantined();
+    match (failure, first_quarantine) {
+        (Some(e), _) => {
             println!("non-finite: yes");
             Err(format!("run stopped: {e}"))
         }
+        (None, Some(step)) => {
+            let list: Vec<String> = quarantined
+                .iter()
+                .take(8)
+                .map(|(i, _)| i.to_string())
+                .collect();
+            println!(
+                "non-finite: {} particle(s) quarantined (frozen at their last finite position), first at step {step}: {}{}",
+                quarantined.len(),
+                list.join(", "),
+                if quarantined.len() > list.len() { ", …" } else { "" }
+            );
+            Err(format!(
+                "run degraded: {} particle(s) went non-finite and were quarantined, the first at step {step} \
+                 (a step too large for the scene, or a spring that degenerated to a point)",
+                quarantined.len()
+            ))
+        }
+        (None, None) => {
+            println!("non-finite: none");
+            Ok(())
+        }
     }
+}
+
+/// The process's peak resident set (Linux's VmHWM), in bytes.
+fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Result<()> {

@@ -65,9 +65,10 @@ pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>
             if let Some(f) = forcing {
                 phi += l.s * f[k];
             }
-            *va -= s.wa * phi * n;
+            let dv = super::guard(phi * n, s, x, *va, *vb);
+            *va -= s.wa * dv;
             // End b's share is 1 − wa (shaders/integrate.wgsl stores wa only).
-            *vb += (1.0 - s.wa) * phi * n;
+            *vb += (1.0 - s.wa) * dv;
         });
     }
 }

@@ -9,6 +9,7 @@
 
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::par;
 use crate::buffers::Packed;
@@ -62,6 +63,7 @@ impl Implicit {
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
         let springs = &packed.springs;
         let (x, v) = (&packed.x, &packed.v);
+        let degenerate = AtomicBool::new(false);
         // Geometry, and per spring the force term `f_s + h K_s (v_b − v_a)` acting on b.
         par::each2(&mut self.axis, &mut self.term, |k, ax, term| {
             let s = &springs[k];
@@ -75,6 +77,14 @@ impl Implicit {
             let force = -(s.stiffness * (len - s.rest) + s.damping * nn.dot(dv)) * nn;
             let k_dv = -s.stiffness * (nn * nn.dot(dv) + t * (dv - nn * nn.dot(dv)));
             *term = force + h * k_dv;
+            if !(term.is_finite() && nn.is_finite()) {
+                // The quarantine's guard (see `integrate::guard`): a degenerate spring leaves
+                // the solve, whose dot products would carry its NaN to every particle, and
+                // only its ends are marked, below.
+                *ax = (DVec3::ZERO, 0.0);
+                *term = DVec3::ZERO;
+                degenerate.store(true, Ordering::Relaxed);
+            }
         });
         // rhs = h (m g + Σ ±term); preconditioner = 1 / diag(M + Σ B_s).
         {
@@ -115,6 +125,17 @@ impl Implicit {
                 *xi += h * *vi;
             }
         });
+        if degenerate.into_inner() {
+            for (s, ax) in packed.springs.iter().zip(&self.axis) {
+                if ax.0 == DVec3::ZERO {
+                    for e in [s.a as usize, s.b as usize] {
+                        if inv_mass[e] != 0.0 {
+                            v[e] = DVec3::NAN;
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Preconditioned CG on `A Δv = rhs`, starting from `Δv = 0`.

@@ -453,6 +453,26 @@ pub(crate) fn spring_response(
     (n, l.p * delta + l.q * delta_dot)
 }
 
+/// The quarantine's guard on one spring's velocity change `dv = φ n` (`guard` in
+/// shaders/integrate.wgsl mirrors it). A finite change passes. A non-finite one from finite
+/// ends (the spring degenerated to a point, or overflowed) becomes NaN, which marks both ends
+/// for the quarantine after the substep. One caused by an end that is already non-finite is
+/// dropped, so a sweep or a frame of device substeps carries it no further.
+#[inline(always)]
+pub(crate) fn guard(dv: DVec3, s: &PackedSpring, x: &[DVec3], va: DVec3, vb: DVec3) -> DVec3 {
+    if dv.is_finite() {
+        dv
+    } else if x[s.a as usize].is_finite()
+        && x[s.b as usize].is_finite()
+        && va.is_finite()
+        && vb.is_finite()
+    {
+        DVec3::NAN
+    } else {
+        DVec3::ZERO
+    }
+}
+
 /// One spring's change of relative velocity: the axis `n` and `φ`.
 #[inline(always)]
 fn spring_update(
@@ -491,13 +511,15 @@ fn spring_pass(
     match (sdx, law) {
         (Some(sdx), Law::Linear(lin)) => par::each2(sdv, sdx, |k, dv, dx| {
             let (s, l) = (&springs[k], &lin[k]);
-            let (n, delta, delta_dot) = stretch(s, x, v[s.a as usize], v[s.b as usize]);
-            *dv = (l.p * delta + l.q * delta_dot) * n;
-            *dx = (l.r * delta + l.s * delta_dot) * n;
+            let (va, vb) = (v[s.a as usize], v[s.b as usize]);
+            let (n, delta, delta_dot) = stretch(s, x, va, vb);
+            *dv = guard((l.p * delta + l.q * delta_dot) * n, s, x, va, vb);
+            *dx = guard((l.r * delta + l.s * delta_dot) * n, s, x, va, vb);
         }),
         _ => par::each(sdv, |k, out| {
             let (n, phi) = spring_update(springs, x, v, law, k);
-            *out = phi * n;
+            let s = &springs[k];
+            *out = guard(phi * n, s, x, v[s.a as usize], v[s.b as usize]);
         }),
     }
 }

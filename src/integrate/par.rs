@@ -42,6 +42,22 @@ pub(crate) fn each2<A: Send, B: Send>(
     }
 }
 
+/// Whether `pred(&a[i], &b[i])` holds for any element (stops early).
+pub(crate) fn any2<A: Sync, B: Sync>(
+    a: &[A],
+    b: &[B],
+    pred: impl Fn(&A, &B) -> bool + Sync + Send,
+) -> bool {
+    if a.len() < PAR_MIN {
+        a.iter().zip(b).any(|(x, y)| pred(x, y))
+    } else {
+        a.par_iter()
+            .zip(b.par_iter())
+            .with_min_len(PAR_CHUNK)
+            .any(|(x, y)| pred(x, y))
+    }
+}
+
 /// `body(&items[i])` for every element (the element decides what it writes).
 pub(crate) fn each_of<T: Sync>(items: &[T], body: impl Fn(&T) + Sync + Send) {
     if items.len() < PAR_MIN {

@@ -58,8 +58,15 @@ impl Xpbd {
                 let gamma = s.damping / (s.stiffness * h);
                 let rel = n.dot((*xb - prev[b]) - (*xa - prev[a]));
                 let dl = -((len - s.rest) + gamma * rel) / ((1.0 + gamma) * (wa + wb) + compliance);
-                *xa -= wa * dl * n;
-                *xb += wb * dl * n;
+                // The quarantine's guard, on the position correction (see `guard`).
+                let dx = dl * n;
+                if dx.is_finite() {
+                    *xa -= wa * dx;
+                    *xb += wb * dx;
+                } else if xa.is_finite() && xb.is_finite() {
+                    *xa = DVec3::NAN;
+                    *xb = DVec3::NAN;
+                }
             });
         }
         let x = &x[..];

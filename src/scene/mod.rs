@@ -36,8 +36,32 @@ fn default_gravity() -> V3 {
     [0.0, -9.81, 0.0]
 }
 
-/// Refuse generators asking for more particles than this before allocating anything.
-pub const MAX_PARTICLES: u64 = 1 << 26;
+/// How much a scene may ask for, checked on its description before anything is allocated, so
+/// a generator asking for 10⁹ particles is a located error, not an out-of-memory abort.
+/// The defaults suit a game (about 6 GB at the CPU back end's measured bytes per particle,
+/// BENCHMARKS.md); raise them with [`Scene::parse_with`], [`Scene::load_with`] and
+/// [`crate::Simulation::from_scene_with`], or `--max-particles` / `--max-springs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    pub max_particles: u64,
+    pub max_springs: u64,
+    /// Fixed substeps per frame (the automatic choice caps itself at the same default).
+    pub max_substeps: u32,
+}
+
+impl Limits {
+    pub const DEFAULT: Limits = Limits {
+        max_particles: 1 << 22,
+        max_springs: 1 << 25,
+        max_substeps: crate::step_control::MAX_SUBSTEPS,
+    };
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits::DEFAULT
+    }
+}
 
 /// A scene file.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -234,18 +258,33 @@ impl Scene {
         }
     }
 
-    /// Reads, parses and validates a scene file.
+    /// Reads, parses and validates a scene file within the default [`Limits`].
     pub fn load(path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        Scene::load_with(path, &Limits::DEFAULT)
+    }
+
+    /// Reads, parses and validates a scene file within `limits`.
+    pub fn load_with(path: impl AsRef<Path>, limits: &Limits) -> Result<Scene, SceneError> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Scene::parse(&text, path)
+        Scene::parse_with(&text, path, limits)
     }
 
-    /// Parses and validates scene text; `path` only names the source in errors.
+    /// Parses and validates scene text within the default [`Limits`]; `path` only names the
+    /// source in errors.
     pub fn parse(text: &str, path: impl AsRef<Path>) -> Result<Scene, SceneError> {
+        Scene::parse_with(text, path, &Limits::DEFAULT)
+    }
+
+    /// Parses and validates scene text within `limits`.
+    pub fn parse_with(
+        text: &str,
+        path: impl AsRef<Path>,
+        limits: &Limits,
+    ) -> Result<Scene, SceneError> {
         let path: PathBuf = path.as_ref().to_path_buf();
         let options = ron::Options::default()
             .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
@@ -255,7 +294,7 @@ impl Scene {
             column: e.span.start.col,
             message: e.code.to_string(),
         })?;
-        let issues = scene.validate();
+        let issues = scene.validate_with(limits);
         if issues.is_empty() {
             Ok(scene)
         } else {
@@ -274,4 +313,57 @@ impl Scene {
             .chain(rope)
             .fold(self.particles.len() as u64, u64::saturating_add)
     }
+
+    /// Number of springs the scene builds (saturating), counted from its description.
+    pub fn spring_count(&self) -> u64 {
+        let cloth = self.cloths.iter().map(|c| {
+            let (x, y) = (c.resolution.0 as u64, c.resolution.1 as u64);
+            let lines = |k: u64| {
+                x.saturating_sub(k)
+                    .saturating_mul(y)
+                    .saturating_add(y.saturating_sub(k).saturating_mul(x))
+            };
+            let shear = 2 * x.saturating_sub(1).saturating_mul(y.saturating_sub(1));
+            lines(1)
+                .saturating_add(if c.shear.is_some() { shear } else { 0 })
+                .saturating_add(if c.bend.is_some() { lines(2) } else { 0 })
+        });
+        let rope = self.ropes.iter().map(|r| {
+            let p = r.particles as u64;
+            p.saturating_sub(1)
+                + if r.bend.is_some() {
+                    p.saturating_sub(2)
+                } else {
+                    0
+                }
+        });
+        cloth
+            .chain(rope)
+            .fold(self.springs.len() as u64, u64::saturating_add)
+    }
+}
+
+/// The body of the scene fuzz target (`tests/fuzz`) and of its regression tests: untrusted
+/// bytes are parsed within small limits and, when they make a sound scene, built and stepped
+/// a few frames on the CPU. An error is a fine answer; a panic, a hang, a runaway allocation
+/// or a non-finite state in an `Ok` is a bug.
+#[doc(hidden)]
+pub fn exercise(data: &[u8]) -> Result<crate::Diagnostics, crate::Error> {
+    const LIMITS: Limits = Limits {
+        max_particles: 4096,
+        max_springs: 32_768,
+        max_substeps: 64,
+    };
+    let text = String::from_utf8_lossy(data);
+    let scene = Scene::parse_with(&text, "fuzz.ron", &LIMITS)?;
+    let mut sim = crate::Simulation::from_scene_with(&scene, &LIMITS)?;
+    let mut config = *sim.config();
+    config.backend = crate::Backend::Cpu;
+    config.substeps = config.substeps.min(LIMITS.max_substeps);
+    config.auto_substeps = false;
+    sim.set_config(config)?;
+    for _ in 0..3 {
+        sim.step()?;
+    }
+    Ok(sim.diagnostics())
 }

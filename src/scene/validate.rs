@@ -1,6 +1,6 @@
 //! Semantic checks; each problem names its entry.
 
-use super::{Anchor, Scene, SpringSpec, MAX_PARTICLES, V3};
+use super::{Anchor, Limits, Scene, SpringSpec, V3};
 use crate::error::Issue;
 use crate::integrate::Integrator;
 
@@ -45,12 +45,26 @@ impl Issues {
 }
 
 impl Scene {
-    /// Every semantic problem, in file order; empty when the scene is sound.
+    /// Every semantic problem, in file order, within the default [`Limits`]; empty when the
+    /// scene is sound.
     pub fn validate(&self) -> Vec<Issue> {
+        self.validate_with(&Limits::DEFAULT)
+    }
+
+    /// Every semantic problem, in file order, within `limits`.
+    pub fn validate_with(&self, limits: &Limits) -> Vec<Issue> {
         let mut is = Issues(Vec::new());
         is.positive("dt", self.dt);
-        if self.substeps == Some(0) {
-            is.push("substeps", "must be ≥ 1");
+        match self.substeps {
+            Some(0) => is.push("substeps", "must be ≥ 1"),
+            Some(k) if k > limits.max_substeps => is.push(
+                "substeps",
+                format!(
+                    "{k} per frame; the limit is {} (Limits::max_substeps)",
+                    limits.max_substeps
+                ),
+            ),
+            _ => {}
         }
         is.finite("gravity", self.gravity);
         if let Some(name) = &self.integrator {
@@ -171,10 +185,23 @@ impl Scene {
         }
         self.validate_props(&mut is);
         let total = self.particle_count();
-        if total > MAX_PARTICLES {
+        if total > limits.max_particles {
             is.push(
                 "scene",
-                format!("asks for {total} particles; the limit is {MAX_PARTICLES}"),
+                format!(
+                    "asks for {total} particles; the limit is {} (Limits::max_particles, --max-particles)",
+                    limits.max_particles
+                ),
+            );
+        }
+        let springs = self.spring_count();
+        if springs > limits.max_springs {
+            is.push(
+                "scene",
+                format!(
+                    "asks for {springs} springs; the limit is {} (Limits::max_springs, --max-springs)",
+                    limits.max_springs
+                ),
             );
         }
         is.0
