@@ -114,7 +114,7 @@ fn finite3(v: vec3<f32>) -> bool {
 // Mirrors integrate::guard (the quarantine): a finite change passes; a non-finite one from
 // finite ends becomes NaN, marking both ends; one from an end already non-finite is dropped.
 fn guard(dv: vec3<f32>, e: vec2<u32>, va: vec3<f32>, vb: vec3<f32>) -> vec3<f32> {
-    if finite3(dv) {
+    if finite3(vec3<f32>(dv.x + dv.y + dv.z)) {
         return dv;
     }
     if finite3(pos[e.x].hi.xyz) && finite3(pos[e.y].hi.xyz) && finite3(va) && finite3(vb) {

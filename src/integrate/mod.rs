@@ -298,6 +298,7 @@ impl Solver {
                     law,
                     &mut self.sdv,
                     sdx,
+                    false,
                 );
                 particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
             }
@@ -309,6 +310,7 @@ impl Solver {
                     Law::Paper(&self.paper, h),
                     &mut self.sdv,
                     None,
+                    false,
                 );
                 particle_pass(packed, &self.sdv, &[], g, h, Update::PaperAlgorithm1);
             }
@@ -335,6 +337,7 @@ impl Solver {
                     law,
                     &mut self.sdv,
                     None,
+                    true,
                 );
                 particle_pass(packed, &self.sdv, &[], g, h, Update::VelocityFirst);
             }
@@ -362,6 +365,7 @@ impl Solver {
             Law::Linear(&self.acc),
             &mut self.sdv,
             None,
+            false,
         );
         acceleration(packed, &self.sdv, g, &mut self.pacc);
         let (springs, x, sacc, pacc) = (&packed.springs, &packed.x, &self.sdv, &self.pacc);
@@ -372,7 +376,10 @@ impl Solver {
             // Remove this spring's own share: +wb·sacc at b, −wa·sacc at a.
             let other_b = pacc[b] - s.wb * sacc[k];
             let other_a = pacc[a] + s.wa * sacc[k];
-            *out = n.dot(other_b - other_a);
+            let f = n.dot(other_b - other_a);
+            // A NaN from a degenerate neighbour is dropped (the quarantine's guard); the
+            // degenerate spring itself is caught by the guarded pass that follows.
+            *out = if f.is_finite() { f } else { 0.0 };
         });
     }
 
@@ -404,6 +411,7 @@ impl Solver {
                 Law::Linear(&self.lin),
                 &mut self.sdv,
                 None,
+                true,
             );
             acceleration(packed, &self.sdv, g, bv);
             bx.copy_from_slice(vt);
@@ -460,7 +468,8 @@ pub(crate) fn spring_response(
 /// dropped, so a sweep or a frame of device substeps carries it no further.
 #[inline(always)]
 pub(crate) fn guard(dv: DVec3, s: &PackedSpring, x: &[DVec3], va: DVec3, vb: DVec3) -> DVec3 {
-    if dv.is_finite() {
+    // One test for the common case: the sum is finite only if every component is.
+    if (dv.x + dv.y + dv.z).is_finite() {
         dv
     } else if x[s.a as usize].is_finite()
         && x[s.b as usize].is_finite()
@@ -507,19 +516,28 @@ fn spring_pass(
     law: Law<'_>,
     sdv: &mut [DVec3],
     sdx: Option<&mut [DVec3]>,
+    guarded: bool,
 ) {
     match (sdx, law) {
         (Some(sdx), Law::Linear(lin)) => par::each2(sdv, sdx, |k, dv, dx| {
             let (s, l) = (&springs[k], &lin[k]);
-            let (va, vb) = (v[s.a as usize], v[s.b as usize]);
-            let (n, delta, delta_dot) = stretch(s, x, va, vb);
-            *dv = guard((l.p * delta + l.q * delta_dot) * n, s, x, va, vb);
-            *dx = guard((l.r * delta + l.s * delta_dot) * n, s, x, va, vb);
+            let (n, delta, delta_dot) = stretch(s, x, v[s.a as usize], v[s.b as usize]);
+            *dv = (l.p * delta + l.q * delta_dot) * n;
+            *dx = (l.r * delta + l.s * delta_dot) * n;
         }),
-        _ => par::each(sdv, |k, out| {
+        // Passes that chain within a substep (RK4's stages, the forced step after its
+        // forcing) are guarded. A lone Jacobi pass is not: it reads only the state at the
+        // start of the substep, which the quarantine check left finite, so a NaN reaches only
+        // the degenerate spring's own ends. (The device batches a frame's substeps, and
+        // guards this pass.)
+        _ if guarded => par::each(sdv, |k, out| {
             let (n, phi) = spring_update(springs, x, v, law, k);
             let s = &springs[k];
             *out = guard(phi * n, s, x, v[s.a as usize], v[s.b as usize]);
+        }),
+        _ => par::each(sdv, |k, out| {
+            let (n, phi) = spring_update(springs, x, v, law, k);
+            *out = phi * n;
         }),
     }
 }
