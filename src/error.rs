@@ -91,14 +91,6 @@ pub enum SimError {
         "harmonic-paper is undefined for spring {spring}: eq. 27 as printed takes √(1 − 2ζ²) with ζ = {zeta:.3} > 0.707"
     )]
     PaperUndefined { spring: usize, zeta: f64 },
-    #[error(
-        "state went non-finite at step {step} (t = {time:.6} s): particle {particle} (scene order)"
-    )]
-    NonFinite {
-        step: u64,
-        time: f64,
-        particle: usize,
-    },
 }
 
 /// Why the GPU back end could not run.

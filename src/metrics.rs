@@ -60,9 +60,15 @@ pub fn worst_step_ratio(packed: &Packed, h: f64) -> Option<(f64, usize)> {
         .max_by(|a, b| a.0.total_cmp(&b.0))
 }
 
+/// Whether a particle's position and velocity are both finite.
+#[inline(always)]
+pub fn finite_state(x: DVec3, v: DVec3) -> bool {
+    x.is_finite() && v.is_finite()
+}
+
 /// Index of the first particle whose position or velocity is not finite.
 pub fn first_non_finite(packed: &Packed) -> Option<usize> {
-    (0..packed.particle_count()).find(|&i| !(packed.x[i].is_finite() && packed.v[i].is_finite()))
+    (0..packed.particle_count()).find(|&i| !finite_state(packed.x[i], packed.v[i]))
 }
 
 /// How many particles have a non-finite position or velocity.
@@ -71,7 +77,7 @@ pub fn non_finite_count(packed: &Packed) -> usize {
         .x
         .iter()
         .zip(&packed.v)
-        .filter(|(x, v)| !(x.is_finite() && v.is_finite()))
+        .filter(|(x, v)| !finite_state(**x, **v))
         .count()
 }
 

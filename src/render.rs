@@ -260,6 +260,20 @@ pub struct Renderer {
     line_vb: Growing,
 }
 
+/// One flat-shaded triangle (its face normal at each corner), on vertices of its own.
+fn push_flat(indices: &mut Vec<u32>, vertices: &mut Vec<Vertex>, tri: [Vec3; 3], colour: [f32; 3]) {
+    let [a, b, c] = tri;
+    let normal = (b - a).cross(c - a).normalize_or_zero().to_array();
+    for q in tri {
+        indices.push(vertices.len() as u32);
+        vertices.push(Vertex {
+            position: q.to_array(),
+            normal,
+            colour,
+        });
+    }
+}
+
 impl Renderer {
     /// A renderer on `ctx`'s device drawing into views of `format`.
     pub fn new(ctx: Arc<GpuContext>, format: wgpu::TextureFormat) -> Result<Self, GpuError> {
@@ -643,16 +657,12 @@ impl Renderer {
             for (i, p) in view.positions.iter().enumerate() {
                 let c = colour(i, &self.strain);
                 for f in FACES {
-                    let [a, b, d] = f.map(|k| *p + size * dirs[k]);
-                    let normal = (b - a).cross(d - a).normalize_or_zero().to_array();
-                    for q in [a, b, d] {
-                        self.tri_indices.push(self.tri_vertices.len() as u32);
-                        self.tri_vertices.push(Vertex {
-                            position: q.to_array(),
-                            normal,
-                            colour: c,
-                        });
-                    }
+                    push_flat(
+                        &mut self.tri_indices,
+                        &mut self.tri_vertices,
+                        f.map(|k| *p + size * dirs[k]),
+                        c,
+                    );
                 }
             }
             let packed = sim.packed();
@@ -701,16 +711,12 @@ impl Renderer {
             };
             let pose = co.position();
             for t in &mesh.triangles {
-                let [a, b, c] = t.map(|i| pose.transform_point(mesh.vertices[i as usize]));
-                let normal = (b - a).cross(c - a).normalize_or_zero().to_array();
-                for q in [a, b, c] {
-                    self.tri_indices.push(self.tri_vertices.len() as u32);
-                    self.tri_vertices.push(Vertex {
-                        position: q.to_array(),
-                        normal,
-                        colour,
-                    });
-                }
+                push_flat(
+                    &mut self.tri_indices,
+                    &mut self.tri_vertices,
+                    t.map(|i| pose.transform_point(mesh.vertices[i as usize])),
+                    colour,
+                );
             }
         }
     }

@@ -640,10 +640,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     let quarantined = sim.quarantined();
     match (failure, first_quarantine) {
-        (Some(e), _) => {
-            println!("non-finite: yes");
-            Err(format!("run stopped: {e}"))
-        }
+        (Some(e), _) => Err(format!("run stopped: {e}")),
         (None, Some(step)) => {
             let list: Vec<String> = quarantined
                 .iter()

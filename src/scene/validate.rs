@@ -184,25 +184,18 @@ impl Scene {
             }
         }
         self.validate_props(&mut is);
-        let total = self.particle_count();
-        if total > limits.max_particles {
-            is.push(
-                "scene",
-                format!(
-                    "asks for {total} particles; the limit is {} (Limits::max_particles, --max-particles)",
-                    limits.max_particles
-                ),
-            );
-        }
-        let springs = self.spring_count();
-        if springs > limits.max_springs {
-            is.push(
-                "scene",
-                format!(
-                    "asks for {springs} springs; the limit is {} (Limits::max_springs, --max-springs)",
-                    limits.max_springs
-                ),
-            );
+        for (count, limit, what) in [
+            (self.particle_count(), limits.max_particles, "particles"),
+            (self.spring_count(), limits.max_springs, "springs"),
+        ] {
+            if count > limit {
+                is.push(
+                    "scene",
+                    format!(
+                        "asks for {count} {what}; the limit is {limit} (Limits::max_{what}, --max-{what})"
+                    ),
+                );
+            }
         }
         is.0
     }
