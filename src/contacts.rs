@@ -15,11 +15,11 @@
 //! particle against its candidates'); the contact itself is parry's shape projection, and a ray
 //! cast along the particle's path catches particles that would tunnel through thin shapes.
 
-use glam::{DVec3, Vec3};
+use glam::{DMat3, DVec3, Vec3};
 use hecs::{Entity, World};
 use rapier3d::parry::bounding_volume::BoundingVolume;
-use rapier3d::parry::query::Ray;
-use rapier3d::parry::shape::Shape as ParryShape;
+use rapier3d::parry::query::{PointQuery, Ray, RayCast};
+use rapier3d::parry::shape::{Ball, Cuboid};
 use rapier3d::prelude::{
     ColliderBuilder, ColliderHandle, ColliderSet, PhysicsWorld, Pose, RigidBody, RigidBodyBuilder,
     RigidBodyHandle, RigidBodySet, RigidBodyType, SharedShape,
@@ -85,8 +85,11 @@ pub struct ContactStage {
     attached: Vec<(usize, Attachment)>,
     /// Per packed particle: attached (placed by its body, so no contacts).
     held: Vec<bool>,
-    /// Positions at the start of the substep (for the swept test).
+    /// Positions at the start of the substep (for the swept test). The contact pass leaves
+    /// each chunk's final positions here, so the next substep needs no copy.
     prev: Vec<DVec3>,
+    /// `prev` holds the positions the last contact pass left, and nothing moved them since.
+    prev_valid: bool,
     /// Colliders near the cloth this substep.
     candidates: Vec<Candidate>,
     /// Per (particle chunk, candidate): what the chunk did to the candidate's body.
@@ -96,9 +99,18 @@ pub struct ContactStage {
     pub stats: ContactStats,
 }
 
+/// A collider's shape, the common primitives by value.
+enum Form {
+    Ball(Ball),
+    Cuboid(Cuboid),
+    Other,
+}
+
 /// A collider near the cloth, with its pose and motion this substep.
 struct Candidate {
     shape: SharedShape,
+    form: Form,
+    frame: Local,
     body: Option<RigidBodyHandle>,
     /// World pose, and its box grown by the thickness.
     pose: Pose,
@@ -308,6 +320,10 @@ impl Props {
         self.stage.begin_substep(packed);
     }
 
+    pub(crate) fn stage_mut(&mut self) -> &mut ContactStage {
+        &mut self.stage
+    }
+
     /// The frame's statistics start again; position-driven bodies given a target through the
     /// API (`set_next_kinematic_position`) reach it at the frame's end, in even substeps.
     pub fn begin_frame(&mut self, substeps: u32) {
@@ -376,6 +392,7 @@ impl ContactStage {
             attached: Vec::new(),
             held: Vec::new(),
             prev: Vec::new(),
+            prev_valid: false,
             candidates: Vec::new(),
             sums: Vec::new(),
             near: Vec::new(),
@@ -408,13 +425,25 @@ impl ContactStage {
             .map(|(e, _)| e)
     }
 
+    /// Before a substep's integrate: where the particles start (the last contact pass left it,
+    /// unless something else moved them since).
     pub fn begin_substep(&mut self, packed: &Packed) {
-        self.prev.clear();
-        self.prev.extend_from_slice(&packed.x);
+        if !self.prev_valid || self.prev.len() != packed.x.len() {
+            self.prev.clear();
+            self.prev.extend_from_slice(&packed.x);
+        }
+        self.prev_valid = false;
     }
 
+    /// Particles moved between substeps by something other than this stage.
+    pub fn moved(&mut self) {
+        self.prev_valid = false;
+    }
+
+    /// The state may have been edited between frames: the first substep copies it.
     pub fn begin_frame(&mut self) {
         self.stats = ContactStats::default();
+        self.prev_valid = false;
     }
 
     /// Attachments then contacts of a substep of `h` against `bodies` and `colliders`, posed
@@ -483,8 +512,16 @@ impl ContactStage {
             );
             let mu_s = 0.5 * (c.friction + co.friction() as f64);
             let sphere = co.shape().compute_bounding_sphere(&pose);
+            let shape = co.shape();
+            let form = match (shape.as_ball(), shape.as_cuboid()) {
+                (Some(b), _) => Form::Ball(*b),
+                (_, Some(b)) => Form::Cuboid(*b),
+                _ => Form::Other,
+            };
             self.candidates.push(Candidate {
                 shape: co.shared_shape().clone(),
+                frame: Local::of(&pose, matches!(form, Form::Ball(_))),
+                form,
                 centre: sphere.center.as_dvec3(),
                 reach: sphere.radius as f64 + c.thickness,
                 body: body.map(|(p, _)| p),
@@ -522,7 +559,7 @@ impl ContactStage {
         self.sums.resize(chunks * nc, Exchange::default());
         self.near.clear();
         self.near.resize(chunks * nc, false);
-        let (candidates, prev, held) = (&self.candidates, &self.prev, &self.held);
+        let (candidates, held) = (&self.candidates, &self.held);
         let Packed {
             x,
             v,
@@ -533,87 +570,108 @@ impl ContactStage {
         let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
         // One pass over particles in fixed chunks; each chunk sums its impulses per collider,
         // then the sums are added in chunk order: the same result whatever the thread count.
-        x.par_chunks_mut(CHUNK)
-            .zip(v.par_chunks_mut(CHUNK))
-            .zip(self.sums.par_chunks_mut(nc))
-            .zip(self.near.par_chunks_mut(nc))
-            .enumerate()
-            .for_each(|(k, (((xs, vs), sums), near))| {
-                // Broad phase, coarse: the colliders whose box meets the box of this chunk's
-                // paths (computed here, while the chunk is in cache).
-                let base = k * CHUNK;
-                let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
-                let mut lo = DVec3::splat(f64::INFINITY);
-                let mut hi = DVec3::splat(f64::NEG_INFINITY);
-                for (j, xi) in xs.iter().enumerate() {
-                    if free(j) {
-                        let x0 = prev[base + j];
-                        lo = lo.min(x0.min(*xi));
-                        hi = hi.max(x0.max(*xi));
-                    }
+        let pass = |(k, ((((xs, vs), prev), sums), near)): ChunkOf| {
+            // Broad phase, coarse: the colliders whose box meets the box of this chunk's
+            // paths (computed here, while the chunk is in cache).
+            let base = k * CHUNK;
+            let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
+            let mut lo = DVec3::splat(f64::INFINITY);
+            let mut hi = DVec3::splat(f64::NEG_INFINITY);
+            for (j, xi) in xs.iter().enumerate() {
+                if free(j) {
+                    let x0 = prev[j];
+                    lo = lo.min(x0.min(*xi));
+                    hi = hi.max(x0.max(*xi));
                 }
-                let mut any = false;
-                for (cand, n) in candidates.iter().zip(near.iter_mut()) {
-                    *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
-                    any |= *n;
+            }
+            let mut any = false;
+            for (cand, n) in candidates.iter().zip(near.iter_mut()) {
+                *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
+                any |= *n;
+            }
+            if !any {
+                prev.copy_from_slice(xs);
+                return;
+            }
+            for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
+                let i = base + j;
+                if !free(j) {
+                    continue;
                 }
-                if !any {
-                    return;
-                }
-                for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
-                    let i = base + j;
-                    if !free(j) {
+                let mut supported = false;
+                for (ci, cand) in candidates.iter().enumerate() {
+                    if !near[ci] {
                         continue;
                     }
-                    let mut supported = false;
-                    for (ci, cand) in candidates.iter().enumerate() {
-                        if !near[ci] {
-                            continue;
-                        }
-                        let sum = &mut sums[ci];
-                        let (x0, x1) = (prev[i], *xi);
-                        // Broad phase, fine: this particle's path against this collider's box.
-                        if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
-                            continue;
-                        }
-                        // And against its bounding sphere: no point of the path comes closer
-                        // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
-                        // |x1 − x0| without a square root.
-                        let d = x1 - x0;
-                        let step = d.abs().element_sum();
-                        if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
-                            continue;
-                        }
-                        let shape = cand.shape.as_ref();
-                        let fast = d.length_squared() > c.thickness * c.thickness;
-                        let Some(hit) = surface(shape, &cand.pose, x0, x1, fast, c.thickness)
-                        else {
-                            continue;
-                        };
-                        sum.contacts += 1;
-                        sum.max_depth = sum.max_depth.max(hit.depth);
-                        sum.swept += usize::from(hit.swept);
-                        if cand.dynamic && supported {
-                            support(&hit, x1, *vi, &c, cand, h, sum);
-                            continue;
-                        }
-                        supported |= !cand.dynamic;
-                        *xi = hit.point + hit.normal * c.thickness;
-                        let vb = cand.velocity_at(hit.point);
-                        let old = *vi;
-                        let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
-                            continue;
-                        };
-                        *vi = vb + new;
-                        if cand.dynamic {
-                            // The body gets −J at the contact point: force and torque.
-                            let j = mass[i] * (*vi - old);
-                            sum.impulse -= j;
-                            sum.torque -= (hit.point - cand.com).cross(j);
-                        }
+                    let sum = &mut sums[ci];
+                    let (x0, x1) = (prev[j], *xi);
+                    // Broad phase, fine: this particle's path against this collider's box.
+                    if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
+                        continue;
+                    }
+                    // And against its bounding sphere: no point of the path comes closer
+                    // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
+                    // |x1 − x0| without a square root.
+                    let d = x1 - x0;
+                    let step = d.abs().element_sum();
+                    if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
+                        continue;
+                    }
+                    let fast = d.length_squared() > c.thickness * c.thickness;
+                    let (frame, t) = (&cand.frame, c.thickness);
+                    // The common primitives statically dispatched: parry's queries inline.
+                    let hit = match &cand.form {
+                        Form::Ball(b) => surface(b, frame, x0, x1, fast, t),
+                        Form::Cuboid(b) => surface(b, frame, x0, x1, fast, t),
+                        Form::Other => surface(cand.shape.as_ref(), frame, x0, x1, fast, t),
+                    };
+                    let Some(hit) = hit else {
+                        continue;
+                    };
+                    sum.contacts += 1;
+                    sum.max_depth = sum.max_depth.max(hit.depth);
+                    sum.swept += usize::from(hit.swept);
+                    if cand.dynamic && supported {
+                        support(&hit, x1, *vi, &c, cand, h, sum);
+                        continue;
+                    }
+                    supported |= !cand.dynamic;
+                    *xi = hit.point + hit.normal * c.thickness;
+                    let vb = cand.velocity_at(hit.point);
+                    let old = *vi;
+                    let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
+                        continue;
+                    };
+                    *vi = vb + new;
+                    if cand.dynamic {
+                        // The body gets −J at the contact point: force and torque.
+                        let j = mass[i] * (*vi - old);
+                        sum.impulse -= j;
+                        sum.torque -= (hit.point - cand.com).cross(j);
                     }
                 }
-            });
+            }
+            prev.copy_from_slice(xs);
+        };
+        // Below the parallel threshold rayon's fork costs more than the pass (small cloths).
+        if x.len() < crate::integrate::par::PAR_MIN {
+            x.chunks_mut(CHUNK)
+                .zip(v.chunks_mut(CHUNK))
+                .zip(self.prev.chunks_mut(CHUNK))
+                .zip(self.sums.chunks_mut(nc))
+                .zip(self.near.chunks_mut(nc))
+                .enumerate()
+                .for_each(pass);
+        } else {
+            x.par_chunks_mut(CHUNK)
+                .zip(v.par_chunks_mut(CHUNK))
+                .zip(self.prev.par_chunks_mut(CHUNK))
+                .zip(self.sums.par_chunks_mut(nc))
+                .zip(self.near.par_chunks_mut(nc))
+                .enumerate()
+                .for_each(pass);
+        }
+        self.prev_valid = true;
         for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
             for s in self.sums.iter().skip(ci).step_by(nc) {
@@ -829,6 +887,18 @@ fn respond(rel: DVec3, normal: DVec3, c: &ContactDef, cand: &Candidate) -> Optio
 /// Particles per parallel task of the contact stage.
 const CHUNK: usize = 512;
 
+/// A chunk's slices: index, positions, velocities, start positions, sums and near flags.
+type ChunkOf<'a> = (
+    usize,
+    (
+        (
+            ((&'a mut [DVec3], &'a mut [DVec3]), &'a mut [DVec3]),
+            &'a mut [Exchange],
+        ),
+        &'a mut [bool],
+    ),
+);
+
 /// What one chunk of particles did against one collider.
 #[derive(Clone, Copy, Default)]
 struct Exchange {
@@ -856,12 +926,62 @@ struct Hit {
     swept: bool,
 }
 
+/// A collider's rigid frame in f64: particles go into it for parry's local queries (one
+/// transform in, one out, and parry's f32 sees only coordinates near the shape).
+#[derive(Clone, Copy)]
+struct Local {
+    origin: DVec3,
+    /// Rotation and its transpose; None when the frame is not rotated, or the shape (a ball) is
+    /// the same whatever its rotation.
+    rotation: Option<(DMat3, DMat3)>,
+}
+
+impl Local {
+    fn of(pose: &Pose, symmetric: bool) -> Self {
+        let q = pose.rotation.as_dquat();
+        let rotation = (!symmetric && q.xyz() != DVec3::ZERO).then(|| {
+            let m = DMat3::from_quat(q.normalize());
+            (m, m.transpose())
+        });
+        Self {
+            origin: pose.translation.as_dvec3(),
+            rotation,
+        }
+    }
+
+    fn point_in(&self, p: DVec3) -> DVec3 {
+        let d = p - self.origin;
+        self.rotation.map_or(d, |(_, t)| t * d)
+    }
+
+    fn vector_out(&self, v: DVec3) -> DVec3 {
+        self.rotation.map_or(v, |(m, _)| m * v)
+    }
+}
+
 /// The contact of a particle that moved from `x0` to `x1`: its path crossed the surface (ray
 /// cast, when `fast`: it moved further than `thickness`), or it ends within `thickness` of it
 /// or inside (projection).
-fn surface(
-    shape: &dyn ParryShape,
-    pose: &Pose,
+fn surface<S: PointQuery + RayCast + ?Sized>(
+    shape: &S,
+    frame: &Local,
+    x0: DVec3,
+    x1: DVec3,
+    fast: bool,
+    thickness: f64,
+) -> Option<Hit> {
+    let (l0, l1) = (frame.point_in(x0), frame.point_in(x1));
+    let hit = local_surface(shape, l0, l1, fast, thickness)?;
+    Some(Hit {
+        point: frame.origin + frame.vector_out(hit.point),
+        normal: frame.vector_out(hit.normal),
+        ..hit
+    })
+}
+
+/// [`surface`] in the shape's frame.
+fn local_surface<S: PointQuery + RayCast + ?Sized>(
+    shape: &S,
     x0: DVec3,
     x1: DVec3,
     fast: bool,
@@ -870,10 +990,10 @@ fn surface(
     let d = x1 - x0;
     if fast {
         // Fast enough to skip a shell: cast the path, from outside only.
-        let start = shape.project_point(pose, x0.as_vec3(), false);
+        let start = shape.project_local_point(x0.as_vec3(), false);
         if !start.is_inside {
             let ray = Ray::new(x0.as_vec3(), d.as_vec3());
-            if let Some(r) = shape.cast_ray_and_get_normal(pose, &ray, 1.0, false) {
+            if let Some(r) = shape.cast_local_ray_and_get_normal(&ray, 1.0, false) {
                 let point = x0 + d * r.time_of_impact as f64;
                 let normal = r.normal.as_dvec3().normalize_or(DVec3::Y);
                 // A path grazing a thin shape from its far side has the normal along it.
@@ -888,7 +1008,7 @@ fn surface(
             }
         }
     }
-    let p = shape.project_point(pose, x1.as_vec3(), false);
+    let p = shape.project_local_point(x1.as_vec3(), false);
     let point = p.point.as_dvec3();
     let diff = x1 - point;
     let dist = diff.length();
@@ -911,4 +1031,62 @@ fn surface(
         depth: if p.is_inside { dist } else { 0.0 },
         swept: false,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Quat;
+    use rapier3d::parry::shape::{Capsule, Shape as ParryShape};
+
+    /// The f64 local frame against parry's own posed queries, for rotated shapes: the same
+    /// surface point and normal within f32 rounding, inside and outside, and along a cast path.
+    #[test]
+    fn local_frame_queries_match_posed_queries() {
+        let pose = Pose::from_parts(
+            Vec3::new(0.3, -1.2, 2.0),
+            Quat::from_euler(glam::EulerRot::XYZ, 0.7, -0.4, 1.1),
+        );
+        let cuboid = Cuboid::new(Vec3::new(0.5, 0.2, 0.8));
+        let capsule = Capsule::new_y(0.6, 0.25);
+        let ball = Ball::new(0.4);
+        let points = [
+            DVec3::new(0.9, -0.9, 2.4),
+            DVec3::new(0.35, -1.15, 2.05),
+            DVec3::new(-0.2, -1.6, 1.5),
+            DVec3::new(0.3, -0.6, 2.3),
+        ];
+        let check = |shape: &dyn ParryShape, symmetric: bool| {
+            let frame = Local::of(&pose, symmetric);
+            for &x in &points {
+                let posed = shape.project_point(&pose, x.as_vec3(), false);
+                let hit = surface(shape, &frame, x, x, false, 10.0).unwrap();
+                assert!((hit.point - posed.point.as_dvec3()).length() < 1e-5, "{x}");
+                let dist = (x - hit.point).length();
+                assert!((hit.depth > 0.0) == posed.is_inside && dist > 1e-3);
+                let outward = if posed.is_inside {
+                    hit.point - x
+                } else {
+                    x - hit.point
+                };
+                assert!((hit.normal - outward / dist).length() < 1e-5);
+            }
+            // A path from far outside through the shape's centre: the swept test meets the
+            // surface where parry's posed ray cast does.
+            let (x0, x1) = (DVec3::new(3.0, 1.0, 4.0), pose.translation.as_dvec3());
+            let hit = surface(shape, &frame, x0, x1, true, 1e-3).unwrap();
+            let ray = Ray::new(x0.as_vec3(), (x1 - x0).as_vec3());
+            let r = shape
+                .cast_ray_and_get_normal(&pose, &ray, 1.0, false)
+                .unwrap();
+            assert!(hit.swept);
+            let at = x0 + (x1 - x0) * r.time_of_impact as f64;
+            assert!((hit.point - at).length() < 1e-5);
+            assert!((hit.normal - r.normal.as_dvec3()).length() < 1e-5);
+        };
+        check(&cuboid, false);
+        check(&capsule, false);
+        check(&ball, true);
+        check(&ball, false);
+    }
 }

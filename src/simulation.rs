@@ -127,10 +127,10 @@ pub struct Simulation {
 /// outside): each particle with a non-finite position or velocity goes back to its position in
 /// `world` (the last finite frame) at rest, before any spring reads it again, and is recorded
 /// in `found`. One parallel read of the state when nothing is wrong.
-fn contain(packed: &mut Packed, world: &World, found: &mut Vec<usize>) {
+fn contain(packed: &mut Packed, world: &World, found: &mut Vec<usize>) -> bool {
     let bad = |x: &DVec3, v: &DVec3| !metrics::finite_state(*x, *v);
     if !crate::integrate::par::any2(&packed.x, &packed.v, bad) {
-        return;
+        return false;
     }
     for i in 0..packed.particle_count() {
         if bad(&packed.x[i], &packed.v[i]) {
@@ -143,6 +143,7 @@ fn contain(packed: &mut Packed, world: &World, found: &mut Vec<usize>) {
             found.push(i);
         }
     }
+    true
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -266,9 +267,18 @@ impl Coupling<'_> {
     }
 
     fn begin_substep(&mut self, packed: &Packed) {
+        self.stage().begin_substep(packed);
+    }
+
+    /// Particles were moved outside the stages (the quarantine restored some).
+    fn moved(&mut self) {
+        self.stage().moved();
+    }
+
+    fn stage(&mut self) -> &mut ContactStage {
         match self {
-            Coupling::Own(p) => p.begin_substep(packed),
-            Coupling::User { stage, .. } => stage.begin_substep(packed),
+            Coupling::Own(p) => p.stage_mut(),
+            Coupling::User { stage, .. } => stage,
         }
     }
 
@@ -601,13 +611,17 @@ impl Simulation {
                 Some(c) => {
                     // Contacts run on the CPU: the state goes back and forth every substep.
                     for k in 1..=substeps {
+                        let t = Instant::now();
                         c.begin_substep(&self.packed);
+                        contacts += t.elapsed();
                         gpu.run(1)?;
                         gpu.read_back(&mut self.packed)?;
                         let t = Instant::now();
                         c.substep(&mut self.packed, h, k);
                         contacts += t.elapsed();
-                        contain(&mut self.packed, &self.world, &mut self.contained);
+                        if contain(&mut self.packed, &self.world, &mut self.contained) {
+                            c.moved();
+                        }
                         gpu.write_state(&self.packed);
                     }
                 }
@@ -622,14 +636,20 @@ impl Simulation {
                 match coupling.as_mut() {
                     None => solver.substep(packed, h)?,
                     Some(c) => {
+                        let t = Instant::now();
                         c.begin_substep(packed);
+                        *contacts_time += t.elapsed();
                         solver.substep(packed, h)?;
                         let t = Instant::now();
                         c.substep(packed, h, k);
                         *contacts_time += t.elapsed();
                     }
                 }
-                contain(packed, world, found);
+                if contain(packed, world, found) {
+                    if let Some(c) = coupling.as_mut() {
+                        c.moved();
+                    }
+                }
                 Ok::<(), SimError>(())
             })
         };
