@@ -1,0 +1,121 @@
+"""Research prototypes for issue 3's large-step target, on the 1-D linearised chain.
+
+Chain of 20 unit masses, the first hung from a pin, unit springs, damping ratio zeta per
+spring (two-body reduced mass). A variant is "stable" at h/h_c when a random state's norm
+grows by at most 0.1 % per step over 3,000 steps (h_c = pi / omega0 of a free-free spring).
+Pure Python, no dependencies: `python3 benches/research/splitting_prototypes.py`.
+"""
+import math
+import random
+
+N = 20
+POINTS = (0.25, 0.5, 0.75, 1, 1.5, 2, 2.0625, 4, 6.0625, 8.0625)
+
+
+def propagator(w2, a, h):
+    """(p, q, r, s) of src/integrate/harmonic.rs: phi = p d + q d', D = r d + s d'."""
+    b2 = w2 - a * a
+    e = math.exp(-a * h)
+    if b2 > 0:
+        b = math.sqrt(b2)
+        c, s = math.cos(b * h), math.sin(b * h) / b
+    else:
+        g = math.sqrt(-b2)
+        c, s = math.cosh(g * h), math.sinh(g * h) / g
+    return (-w2 * e * s, e * c - 1 - a * e * s, e * c - 1 + a * e * s, e * s - h)
+
+
+def oscillate(u, w, h, omega, zeta):
+    """Exact u'' + 2 zeta omega u' + omega^2 u = 0 over h (under-damped)."""
+    wd = omega * math.sqrt(1 - zeta * zeta)
+    e = math.exp(-zeta * omega * h)
+    c, s = math.cos(wd * h), math.sin(wd * h)
+    return (e * (u * c + (w + zeta * omega * u) / wd * s),
+            e * (w * c - (omega * omega * u + zeta * omega * w) / wd * s))
+
+
+def spring_gs(x, v, h, zeta, displacement):
+    """Coloured Gauss-Seidel over springs (harmonic-gs); `displacement` adds the closed form's
+    displacement D beyond free drift, accumulated over the sweep (x += h v0 + sum D)."""
+    inv = [0.0] + [1.0] * N
+    v0, dx = v[:], [0.0] * (N + 1)
+    for first in (0, 1):
+        for a in range(first, N, 2):
+            b = a + 1
+            mu = 1 / (inv[a] + inv[b])
+            p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
+            wa = inv[a] / (inv[a] + inv[b])
+            d, dd = x[b] - x[a], v[b] - v[a]
+            phi, big_d = p * d + q * dd, r * d + s * dd
+            v[a] -= wa * phi
+            v[b] += (1 - wa) * phi
+            if displacement:
+                dx[a] -= wa * big_d
+                dx[b] += (1 - wa) * big_d
+    for i in range(1, N + 1):
+        x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
+
+
+def vertex_exact(x, v, h, zeta, neighbours):
+    """Coloured Gauss-Seidel over particles: each particle follows its exact oscillation
+    about its neighbours, which either move uniformly from where they are now ("moving"),
+    move uniformly from where they started the step ("moving from start"), or stay put
+    ("frozen")."""
+    c = 2 * zeta * math.sqrt(0.5)
+    start = x[:]
+    for first in (1, 2):
+        for i in range(first, N + 1, 2):
+            nb = [j for j in (i - 1, i + 1) if 0 <= j <= N]
+            n = len(nb)
+            pos = start if neighbours == "moving from start" else x
+            cx = sum(pos[j] for j in nb) / n
+            cv = sum(v[j] for j in nb) / n
+            omega, z = math.sqrt(n), n * c / (2 * math.sqrt(n))
+            if neighbours == "frozen":
+                off = n * c * cv / n
+                u, w = oscillate(x[i] - cx - off, v[i], h, omega, z)
+                x[i], v[i] = cx + off + u, w
+            else:
+                u, w = oscillate(pos[i] - cx, v[i] - cv, h, omega, z)
+                x[i], v[i] = cx + cv * h + u, cv + w
+
+
+def growth(step, hr, zeta, steps=3000):
+    h = hr * math.pi / math.sqrt(2.0)
+    random.seed(3)
+    x = [0.0] + [random.uniform(-1, 1) for _ in range(N)]
+    v = [0.0] + [random.uniform(-1, 1) for _ in range(N)]
+    n0 = math.sqrt(sum(a * a for a in x + v))
+    for _ in range(steps):
+        step(x, v, h, zeta)
+        n = math.sqrt(sum(a * a for a in x + v))
+        if not math.isfinite(n) or n > 1e12 * n0:
+            return math.inf
+    return (n / n0) ** (1 / steps)
+
+
+def translation_kept(step):
+    """Galilean invariance: a chain at rest length moving uniformly keeps its velocity (read at
+    the middle particle after one step of 1.3 h_c, too soon for the pin to reach it)."""
+    x, v = [0.0] * (N + 1), [1.0] * (N + 1)
+    step(x, v, 1.3 * math.pi / math.sqrt(2.0), 0.0)
+    return abs(v[N // 2] - 1.0) < 1e-9
+
+
+VARIANTS = {
+    "harmonic-gs (plain update, for reference)": lambda x, v, h, z: spring_gs(x, v, h, z, False),
+    "spring GS + exact displacement": lambda x, v, h, z: spring_gs(x, v, h, z, True),
+    "vertex exact, neighbours moving": lambda x, v, h, z: vertex_exact(x, v, h, z, "moving"),
+    "vertex exact, neighbours moving from start":
+        lambda x, v, h, z: vertex_exact(x, v, h, z, "moving from start"),
+    "vertex exact, neighbours frozen": lambda x, v, h, z: vertex_exact(x, v, h, z, "frozen"),
+}
+
+if __name__ == "__main__":
+    print("| variant | zeta | " + " | ".join(str(p) for p in POINTS) + " | uniform motion kept |")
+    print("|---|---|" + "---|" * len(POINTS) + "---|")
+    for name, step in VARIANTS.items():
+        kept = "yes" if translation_kept(step) else "no"
+        for zeta in (0.0, 0.2):
+            cells = ["✓" if growth(step, p, zeta) <= 1.001 else "✗" for p in POINTS]
+            print(f"| {name} | {zeta} | " + " | ".join(cells) + f" | {kept} |")
