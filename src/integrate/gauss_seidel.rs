@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::harmonic::Linear;
 use super::par;
-use crate::buffers::Packed;
+use crate::buffers::{Packed, PackedSpring};
 
 /// A slice written from parallel tasks at indices that never collide.
 pub(super) struct Disjoint<'a, T> {
@@ -39,31 +39,53 @@ impl<'a, T> Disjoint<'a, T> {
     }
 }
 
+/// A spring as the sweep reads it, copied in colour order at prepare: each colour is then one
+/// sequential stream instead of a gather through the colouring's index list.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SweepSpring {
+    spring: PackedSpring,
+    lin: Linear,
+    /// Index in `Packed::springs` (the forcing is stored by it).
+    index: u32,
+}
+
+/// The springs of `packed`'s colouring, colour after colour, with their coefficients.
+pub(super) fn order(packed: &Packed, lin: &[Linear], out: &mut Vec<SweepSpring>) {
+    out.clear();
+    out.extend(packed.colouring.springs.iter().map(|&k| SweepSpring {
+        spring: packed.springs[k as usize],
+        lin: lin[k as usize],
+        index: k,
+    }));
+}
+
 /// One sweep over all colours: `φ = p δ + q δ̇ + s a` per spring (with `a` the frozen relative
 /// acceleration from everything else when `forcing` is given), applied to both ends at once.
-pub(super) fn sweep(packed: &mut Packed, lin: &[Linear], forcing: Option<&[f64]>, reverse: bool) {
+/// `springs` is [`order`]'s output for `packed`.
+pub(super) fn sweep(
+    packed: &mut Packed,
+    springs: &[SweepSpring],
+    forcing: Option<&[f64]>,
+    reverse: bool,
+) {
     let Packed {
-        x,
-        v,
-        springs,
-        colouring,
-        ..
+        x, v, colouring, ..
     } = packed;
-    let (x, springs) = (&x[..], &springs[..]);
+    let x = &x[..];
     let v = Disjoint::new(&mut v[..]);
     let colours = colouring.colours();
     for i in 0..colours {
         let c = if reverse { colours - 1 - i } else { i };
-        par::each_of(colouring.members(c), |&k| {
-            let k = k as usize;
-            let s = &springs[k];
+        let range = colouring.offsets[c] as usize..colouring.offsets[c + 1] as usize;
+        par::each_of(&springs[range], |k| {
+            let s = &k.spring;
             let (a, b) = (s.a as usize, s.b as usize);
             // SAFETY: springs of one colour have pairwise distinct ends, and a != b.
             let (va, vb) = unsafe { (v.get(a), v.get(b)) };
-            let l = &lin[k];
+            let l = &k.lin;
             let (n, mut phi) = super::spring_response(s, x, *va, *vb, l);
             if let Some(f) = forcing {
-                phi += l.s * f[k];
+                phi += l.s * f[k.index as usize];
             }
             let dv = super::guard(phi * n, s, x, *va, *vb);
             *va -= s.wa * dv;

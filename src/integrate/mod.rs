@@ -135,6 +135,8 @@ pub struct Solver {
     /// (particles, springs) the scratch was sized for.
     sized_for: (usize, usize),
     lin: Vec<Linear>,
+    /// Gauss–Seidel integrators: the springs and coefficients in colour order.
+    swept: Vec<gauss_seidel::SweepSpring>,
     paper: Vec<PaperSpring>,
     sdv: Vec<DVec3>,
     sdx: Vec<DVec3>,
@@ -157,6 +159,7 @@ impl Solver {
             h: f64::NAN,
             sized_for: (0, 0),
             lin: Vec::new(),
+            swept: Vec::new(),
             paper: Vec::new(),
             sdv: Vec::new(),
             sdx: Vec::new(),
@@ -272,6 +275,13 @@ impl Solver {
                 }
             }
         }
+        self.swept.clear();
+        if matches!(
+            self.integrator,
+            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
+        ) {
+            gauss_seidel::order(packed, &self.lin, &mut self.swept);
+        }
         self.h = h;
         self.sized_for = (n, m);
         Ok(())
@@ -317,13 +327,13 @@ impl Solver {
             Integrator::Rk4 => self.rk4(packed, h),
             Integrator::HarmonicGs => {
                 gauss_seidel::add_gravity(packed, g, h);
-                gauss_seidel::sweep(packed, &self.lin, None, false);
+                gauss_seidel::sweep(packed, &self.swept, None, false);
                 gauss_seidel::drift(packed, h);
             }
             Integrator::HarmonicSgs => {
                 gauss_seidel::add_gravity(packed, g, h);
                 for k in 0..SGS_SWEEPS {
-                    gauss_seidel::sweep(packed, &self.lin, None, k % 2 == 1);
+                    gauss_seidel::sweep(packed, &self.swept, None, k % 2 == 1);
                 }
                 gauss_seidel::drift(packed, h);
             }
@@ -344,7 +354,7 @@ impl Solver {
             Integrator::HarmonicForcedGs => {
                 self.freeze_forcing(packed);
                 // Gravity is in the forcing; it reaches the velocities after the sweep.
-                gauss_seidel::sweep(packed, &self.lin, Some(&self.force), false);
+                gauss_seidel::sweep(packed, &self.swept, Some(&self.force), false);
                 gauss_seidel::add_gravity(packed, g, h);
                 gauss_seidel::drift(packed, h);
             }
