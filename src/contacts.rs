@@ -315,11 +315,7 @@ impl Props {
         self.stage.dangling(world, &self.physics.bodies)
     }
 
-    /// Call before each substep's integrate: remembers where particles start.
-    pub fn begin_substep(&mut self, packed: &Packed) {
-        self.stage.begin_substep(packed);
-    }
-
+    /// The contact stage (the simulation's substep loop drives it directly).
     pub(crate) fn stage_mut(&mut self) -> &mut ContactStage {
         &mut self.stage
     }
@@ -570,107 +566,103 @@ impl ContactStage {
         let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
         // One pass over particles in fixed chunks; each chunk sums its impulses per collider,
         // then the sums are added in chunk order: the same result whatever the thread count.
-        let pass = |(k, ((((xs, vs), prev), sums), near)): ChunkOf| {
-            // Broad phase, coarse: the colliders whose box meets the box of this chunk's
-            // paths (computed here, while the chunk is in cache).
-            let base = k * CHUNK;
-            let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
-            let mut lo = DVec3::splat(f64::INFINITY);
-            let mut hi = DVec3::splat(f64::NEG_INFINITY);
-            for (j, xi) in xs.iter().enumerate() {
-                if free(j) {
-                    let x0 = prev[j];
-                    lo = lo.min(x0.min(*xi));
-                    hi = hi.max(x0.max(*xi));
-                }
-            }
-            let mut any = false;
-            for (cand, n) in candidates.iter().zip(near.iter_mut()) {
-                *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
-                any |= *n;
-            }
-            if !any {
-                prev.copy_from_slice(xs);
-                return;
-            }
-            for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
-                let i = base + j;
-                if !free(j) {
-                    continue;
-                }
-                let mut supported = false;
-                for (ci, cand) in candidates.iter().enumerate() {
-                    if !near[ci] {
-                        continue;
-                    }
-                    let sum = &mut sums[ci];
-                    let (x0, x1) = (prev[j], *xi);
-                    // Broad phase, fine: this particle's path against this collider's box.
-                    if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
-                        continue;
-                    }
-                    // And against its bounding sphere: no point of the path comes closer
-                    // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
-                    // |x1 − x0| without a square root.
-                    let d = x1 - x0;
-                    let step = d.abs().element_sum();
-                    if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
-                        continue;
-                    }
-                    let fast = d.length_squared() > c.thickness * c.thickness;
-                    let (frame, t) = (&cand.frame, c.thickness);
-                    // The common primitives statically dispatched: parry's queries inline.
-                    let hit = match &cand.form {
-                        Form::Ball(b) => surface(b, frame, x0, x1, fast, t),
-                        Form::Cuboid(b) => surface(b, frame, x0, x1, fast, t),
-                        Form::Other => surface(cand.shape.as_ref(), frame, x0, x1, fast, t),
-                    };
-                    let Some(hit) = hit else {
-                        continue;
-                    };
-                    sum.contacts += 1;
-                    sum.max_depth = sum.max_depth.max(hit.depth);
-                    sum.swept += usize::from(hit.swept);
-                    if cand.dynamic && supported {
-                        support(&hit, x1, *vi, &c, cand, h, sum);
-                        continue;
-                    }
-                    supported |= !cand.dynamic;
-                    *xi = hit.point + hit.normal * c.thickness;
-                    let vb = cand.velocity_at(hit.point);
-                    let old = *vi;
-                    let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
-                        continue;
-                    };
-                    *vi = vb + new;
-                    if cand.dynamic {
-                        // The body gets −J at the contact point: force and torque.
-                        let j = mass[i] * (*vi - old);
-                        sum.impulse -= j;
-                        sum.torque -= (hit.point - cand.com).cross(j);
-                    }
-                }
-            }
-            prev.copy_from_slice(xs);
-        };
-        // Below the parallel threshold rayon's fork costs more than the pass (small cloths).
-        if x.len() < crate::integrate::par::PAR_MIN {
-            x.chunks_mut(CHUNK)
-                .zip(v.chunks_mut(CHUNK))
-                .zip(self.prev.chunks_mut(CHUNK))
-                .zip(self.sums.chunks_mut(nc))
-                .zip(self.near.chunks_mut(nc))
-                .enumerate()
-                .for_each(pass);
+        // Below the parallel threshold the chunks are not split: rayon's fork costs more than
+        // the pass (small cloths), and the chunk order, hence the sums, stay the same.
+        let min_len = if x.len() < crate::integrate::par::PAR_MIN {
+            usize::MAX
         } else {
-            x.par_chunks_mut(CHUNK)
-                .zip(v.par_chunks_mut(CHUNK))
-                .zip(self.prev.par_chunks_mut(CHUNK))
-                .zip(self.sums.par_chunks_mut(nc))
-                .zip(self.near.par_chunks_mut(nc))
-                .enumerate()
-                .for_each(pass);
-        }
+            1
+        };
+        x.par_chunks_mut(CHUNK)
+            .zip(v.par_chunks_mut(CHUNK))
+            .zip(self.prev.par_chunks_mut(CHUNK))
+            .zip(self.sums.par_chunks_mut(nc))
+            .zip(self.near.par_chunks_mut(nc))
+            .enumerate()
+            .with_min_len(min_len)
+            .for_each(|(k, ((((xs, vs), prev), sums), near))| {
+                // Broad phase, coarse: the colliders whose box meets the box of this chunk's
+                // paths (computed here, while the chunk is in cache).
+                let base = k * CHUNK;
+                let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
+                let mut lo = DVec3::splat(f64::INFINITY);
+                let mut hi = DVec3::splat(f64::NEG_INFINITY);
+                for (j, xi) in xs.iter().enumerate() {
+                    if free(j) {
+                        let x0 = prev[j];
+                        lo = lo.min(x0.min(*xi));
+                        hi = hi.max(x0.max(*xi));
+                    }
+                }
+                let mut any = false;
+                for (cand, n) in candidates.iter().zip(near.iter_mut()) {
+                    *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
+                    any |= *n;
+                }
+                if !any {
+                    prev.copy_from_slice(xs);
+                    return;
+                }
+                for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
+                    let i = base + j;
+                    if !free(j) {
+                        continue;
+                    }
+                    let mut supported = false;
+                    for (ci, cand) in candidates.iter().enumerate() {
+                        if !near[ci] {
+                            continue;
+                        }
+                        let sum = &mut sums[ci];
+                        let (x0, x1) = (prev[j], *xi);
+                        // Broad phase, fine: this particle's path against this collider's box.
+                        if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
+                            continue;
+                        }
+                        // And against its bounding sphere: no point of the path comes closer
+                        // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
+                        // |x1 − x0| without a square root.
+                        let d = x1 - x0;
+                        let step = d.abs().element_sum();
+                        if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
+                            continue;
+                        }
+                        let fast = d.length_squared() > c.thickness * c.thickness;
+                        let (frame, t) = (&cand.frame, c.thickness);
+                        // The common primitives statically dispatched: parry's queries inline.
+                        let hit = match &cand.form {
+                            Form::Ball(b) => surface(b, frame, x0, x1, fast, t),
+                            Form::Cuboid(b) => surface(b, frame, x0, x1, fast, t),
+                            Form::Other => surface(cand.shape.as_ref(), frame, x0, x1, fast, t),
+                        };
+                        let Some(hit) = hit else {
+                            continue;
+                        };
+                        sum.contacts += 1;
+                        sum.max_depth = sum.max_depth.max(hit.depth);
+                        sum.swept += usize::from(hit.swept);
+                        if cand.dynamic && supported {
+                            support(&hit, x1, *vi, &c, cand, h, sum);
+                            continue;
+                        }
+                        supported |= !cand.dynamic;
+                        *xi = hit.point + hit.normal * c.thickness;
+                        let vb = cand.velocity_at(hit.point);
+                        let old = *vi;
+                        let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
+                            continue;
+                        };
+                        *vi = vb + new;
+                        if cand.dynamic {
+                            // The body gets −J at the contact point: force and torque.
+                            let j = mass[i] * (*vi - old);
+                            sum.impulse -= j;
+                            sum.torque -= (hit.point - cand.com).cross(j);
+                        }
+                    }
+                }
+                prev.copy_from_slice(xs);
+            });
         self.prev_valid = true;
         for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
@@ -886,18 +878,6 @@ fn respond(rel: DVec3, normal: DVec3, c: &ContactDef, cand: &Candidate) -> Optio
 
 /// Particles per parallel task of the contact stage.
 const CHUNK: usize = 512;
-
-/// A chunk's slices: index, positions, velocities, start positions, sums and near flags.
-type ChunkOf<'a> = (
-    usize,
-    (
-        (
-            ((&'a mut [DVec3], &'a mut [DVec3]), &'a mut [DVec3]),
-            &'a mut [Exchange],
-        ),
-        &'a mut [bool],
-    ),
-);
 
 /// What one chunk of particles did against one collider.
 #[derive(Clone, Copy, Default)]
