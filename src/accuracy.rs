@@ -204,7 +204,7 @@ const LARGE: usize = 20_000;
 
 fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
     let c = step_control::choose(packed, integrator, T);
-    let large = packed.springs.len() > LARGE;
+    let large = packed.spring_count() > LARGE;
     match (c.limit, large) {
         (Some(_), false) => {
             let n = c.substeps as u64;
@@ -224,7 +224,7 @@ fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
 /// the RMS change from the run at twice that step (a bound on the reference's own error,
 /// about 1/15 of it for a fourth-order method).
 pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64, f64) {
-    let factor = if packed.springs.len() > LARGE { 2 } else { 4 };
+    let factor = if packed.spring_count() > LARGE { 2 } else { 4 };
     let n = factor * step_control::choose(packed, Integrator::Rk4, T).substeps as u64;
     // `n` steps; the reference itself takes 2n.
     let a = simulate(packed, Integrator::Rk4, g, n, 1.0)
@@ -289,7 +289,12 @@ pub fn measure(
         // Net acceleration below 1e-5 g: well under the strain digits reported.
         let relaxed = statics::relax(&packed, g, 1e-5 * g.length(), 400_000);
         let static_strain = statics::static_strain(&packed, &relaxed);
-        let e_ref = packed.mass.iter().filter(|m| m.is_finite()).sum::<f64>() * g.length() * 1.0;
+        let e_ref = (0..packed.particle_count())
+            .map(|i| packed.mass(i))
+            .filter(|m| m.is_finite())
+            .sum::<f64>()
+            * g.length()
+            * 1.0;
         let hc = stability::h_crit(&packed);
         for &(_, integrator, steps) in plan.iter().filter(|r| r.0 == ci) {
             progress(
@@ -298,7 +303,7 @@ pub fn measure(
                 &format!("{}: {integrator} at {steps} steps/s", case.name),
             );
             let outcome = simulate(&packed, integrator, g, steps, e_ref);
-            let reps = if packed.springs.len() > LARGE {
+            let reps = if packed.spring_count() > LARGE {
                 1
             } else {
                 repeats
@@ -337,7 +342,7 @@ pub fn measure(
                 done += 1;
                 let mut walls = Vec::new();
                 let mut last = None;
-                let reps = if packed.springs.len() > LARGE {
+                let reps = if packed.spring_count() > LARGE {
                     1
                 } else {
                     repeats.max(1)

@@ -58,7 +58,7 @@ pub fn measure(
     let packed = Packed::gather(&scene.build().world).expect("generated scene is consistent");
     let h = scene.dt;
     let g = DVec3::from(scene.gravity);
-    let m = packed.springs.len();
+    let m = packed.spring_count();
     let mut samples = vec![Vec::new(); integrators.len()];
     let mut runs: Vec<(Packed, Solver)> = integrators
         .iter()

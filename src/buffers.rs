@@ -3,10 +3,13 @@
 //! Topology (springs, CSR incidence, masses) is packed once per topology change; between
 //! gathers the buffers are the state and the World is only written back at scatter.
 
+use std::ops::Range;
+
 use glam::DVec3;
 use hecs::{Entity, World};
+use rayon::prelude::*;
 
-use crate::components::{Particle, Pin, SceneIndex, Spring};
+use crate::components::{ClothSprings, GridLink, Particle, Pin, SceneIndex, Spring};
 use crate::error::SimError;
 use crate::integrate::paper::reduced_mass;
 
@@ -67,6 +70,9 @@ impl Incidence {
     /// `Σ coef · per_spring[s]` over particle `i`'s springs, in a fixed order (deterministic).
     #[inline(always)]
     pub fn sum(&self, per_spring: &[DVec3], i: usize) -> DVec3 {
+        if self.offsets.is_empty() {
+            return DVec3::ZERO;
+        }
         let (lo, hi) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
         let mut sum = DVec3::ZERO;
         for k in lo..hi {
@@ -149,21 +155,148 @@ impl Colouring {
     }
 }
 
+/// A cloth's springs in packed form ([`ClothSprings`] with its particles located): the
+/// particle at grid `(c, r)` is packed index `base + r·cols + c`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedGrid {
+    /// The entity holding the [`ClothSprings`].
+    pub entity: Entity,
+    pub base: u32,
+    pub cols: u32,
+    pub rows: u32,
+    pub links: Vec<GridLink>,
+}
+
+impl PackedGrid {
+    /// Its particles' packed indices.
+    pub fn range(&self) -> Range<usize> {
+        self.base as usize..self.base as usize + self.cols as usize * self.rows as usize
+    }
+
+    /// Rows a link reaches across (the largest `|dr|`).
+    pub fn reach(&self) -> usize {
+        self.links
+            .iter()
+            .map(|l| l.offset.1.unsigned_abs() as usize)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The springs of grid row `row`, each once, in the order expansion packs them: cell by
+    /// cell, the links in order, a link with `dc < 0` anchored `|dc|` columns right.
+    fn row_springs<'a>(
+        &'a self,
+        row: u32,
+        inv_mass: &'a [f64],
+    ) -> impl Iterator<Item = PackedSpring> + 'a {
+        let (cols, rows) = (self.cols, self.rows);
+        (0..cols).flat_map(move |col| {
+            self.links.iter().filter_map(move |l| {
+                let (dc, dr) = l.offset;
+                let (adc, adr) = (dc.unsigned_abs(), dr.unsigned_abs());
+                if col + adc >= cols || row + adr >= rows {
+                    return None;
+                }
+                let at = |c: u32, r: u32| self.base + r * cols + c;
+                let a = at(col + (-dc).max(0) as u32, row + (-dr).max(0) as u32);
+                let b = at(col + dc.max(0) as u32, row + dr.max(0) as u32);
+                Some(PackedSpring::new(
+                    a,
+                    b,
+                    l.rest_length,
+                    l.stiffness,
+                    l.damping,
+                    inv_mass,
+                ))
+            })
+        })
+    }
+
+    /// Every spring of the grid, in expansion order.
+    pub fn springs<'a>(&'a self, inv_mass: &'a [f64]) -> impl Iterator<Item = PackedSpring> + 'a {
+        (0..self.rows).flat_map(move |r| self.row_springs(r, inv_mass))
+    }
+
+    pub fn spring_count(&self) -> usize {
+        self.links
+            .iter()
+            .map(|l| {
+                let (dc, dr) = (l.offset.0.unsigned_abs(), l.offset.1.unsigned_abs());
+                self.cols.saturating_sub(dc) as usize * self.rows.saturating_sub(dr) as usize
+            })
+            .sum()
+    }
+}
+
+impl PackedSpring {
+    /// A spring between packed particles `a` and `b`, split by their masses (`1/inv_mass`,
+    /// infinite where pinned).
+    pub fn new(a: u32, b: u32, rest: f64, stiffness: f64, damping: f64, inv_mass: &[f64]) -> Self {
+        let mass = |i: u32| {
+            let w = inv_mass[i as usize];
+            if w == 0.0 {
+                f64::INFINITY
+            } else {
+                1.0 / w
+            }
+        };
+        let (ma, mb) = (mass(a), mass(b));
+        let mu = reduced_mass(ma, mb);
+        let (wa, wb) = if mu.is_finite() {
+            (mu / ma, mu / mb)
+        } else {
+            (0.0, 0.0)
+        };
+        PackedSpring {
+            a,
+            b,
+            rest,
+            stiffness,
+            damping,
+            mu,
+            wa,
+            wb,
+        }
+    }
+}
+
+/// What [`Packed::gather_with`] builds beyond the state.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GatherOptions {
+    /// Keep cloth springs as [`PackedGrid`]s (no memory per spring; only the integrators with
+    /// a grid pass take them) instead of expanding them into [`Packed::springs`].
+    pub keep_grids: bool,
+    /// Build the colouring (Gauss–Seidel, XPBD and the GPU back end need it).
+    pub colouring: bool,
+}
+
+impl GatherOptions {
+    /// Everything expanded and coloured: what any integrator or tool can run on.
+    pub const FULL: Self = Self {
+        keep_grids: false,
+        colouring: true,
+    };
+}
+
 /// The packed scene: particle state in scene order, springs, and per-particle incidence (CSR).
 #[derive(Clone, Debug, Default)]
 pub struct Packed {
     pub entities: Vec<Entity>,
     pub x: Vec<DVec3>,
     pub v: Vec<DVec3>,
-    /// kg; infinite for pinned particles.
-    pub mass: Vec<f64>,
     /// 0 for pinned particles.
     pub inv_mass: Vec<f64>,
+    /// Springs one by one: the World's [`Spring`]s, then the cloths' unless kept as grids.
     pub springs: Vec<PackedSpring>,
+    /// Cloth springs kept implicit ([`GatherOptions::keep_grids`]), by packed range.
+    pub grids: Vec<PackedGrid>,
+    /// Packed ranges of the particles in no grid (with kept grids; otherwise everything).
+    pub loose: Vec<Range<usize>>,
+    /// Incidence of `springs` (empty without springs).
     pub incidence: Incidence,
     pub colouring: Colouring,
-    /// Entity id → packed index (`u32::MAX` where none).
-    index_by_id: Vec<u32>,
+    /// Entity id → packed index (`u32::MAX` where none), built on first use.
+    index_by_id: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl Packed {
@@ -171,27 +304,76 @@ impl Packed {
         self.x.len()
     }
 
-    /// Packs every particle and spring of the World.
-    pub fn gather(world: &World) -> Result<Self, SimError> {
-        let mut rows: Vec<(u32, u32, Entity, Particle, bool)> = world
-            .query::<(Entity, &Particle, Option<&Pin>, Option<&SceneIndex>)>()
-            .iter()
-            .map(|(e, p, pin, idx)| (idx.map_or(u32::MAX, |i| i.0), e.id(), e, *p, pin.is_some()))
-            .collect();
-        rows.sort_unstable_by_key(|r| (r.0, r.1));
+    /// Particle `i`'s mass (kg), infinite when pinned.
+    #[inline]
+    pub fn mass(&self, i: usize) -> f64 {
+        let w = self.inv_mass[i];
+        if w == 0.0 {
+            f64::INFINITY
+        } else {
+            1.0 / w
+        }
+    }
 
-        let n = rows.len();
-        let mut packed = Packed {
-            entities: Vec::with_capacity(n),
-            x: Vec::with_capacity(n),
-            v: Vec::with_capacity(n),
-            mass: Vec::with_capacity(n),
-            inv_mass: Vec::with_capacity(n),
-            ..Default::default()
-        };
-        let max_id = rows.iter().map(|r| r.1).max().map_or(0, |m| m as usize + 1);
-        let mut index_of = vec![u32::MAX; max_id];
-        for (i, (_, id, e, p, pinned)) in rows.into_iter().enumerate() {
+    /// Springs in all, kept grids included.
+    pub fn spring_count(&self) -> usize {
+        self.springs.len()
+            + self
+                .grids
+                .iter()
+                .map(PackedGrid::spring_count)
+                .sum::<usize>()
+    }
+
+    /// Every spring, `springs` then the kept grids' (expansion order).
+    pub fn all_springs(&self) -> impl Iterator<Item = PackedSpring> + '_ {
+        let inv = &self.inv_mass[..];
+        self.springs
+            .iter()
+            .copied()
+            .chain(self.grids.iter().flat_map(move |g| g.springs(inv)))
+    }
+
+    /// [`Self::all_springs`] in parallel (unordered).
+    pub fn par_springs(&self) -> impl ParallelIterator<Item = PackedSpring> + '_ {
+        let inv = &self.inv_mass[..];
+        self.springs
+            .par_iter()
+            .copied()
+            .chain(self.grids.par_iter().flat_map(move |g| {
+                (0..g.rows)
+                    .into_par_iter()
+                    .flat_map_iter(move |r| g.row_springs(r, inv))
+            }))
+    }
+
+    /// Packs every particle and spring of the World, cloths expanded and coloured.
+    pub fn gather(world: &World) -> Result<Self, SimError> {
+        Self::gather_with(world, GatherOptions::FULL)
+    }
+
+    /// Packs the World.
+    pub fn gather_with(world: &World, options: GatherOptions) -> Result<Self, SimError> {
+        let mut packed = Packed::default();
+        packed.regather(world, options)?;
+        Ok(packed)
+    }
+
+    /// Packs the World into `self`. Everything is checked before the old buffers go, so an
+    /// error leaves them as they were; after that the only scratch beside the World is the
+    /// sort keys (16 B per particle), freed before the state is allocated.
+    pub fn regather(&mut self, world: &World, options: GatherOptions) -> Result<(), SimError> {
+        let mut keys: Vec<(u32, u32, Entity)> = world
+            .query::<(Entity, &Particle, Option<&SceneIndex>)>()
+            .iter()
+            .map(|(e, _, idx)| (idx.map_or(u32::MAX, |i| i.0), e.id(), e))
+            .collect();
+        keys.sort_unstable_by_key(|k| (k.0, k.1));
+        let view = world.view::<(&Particle, Option<&Pin>)>();
+        for &(_, _, e) in &keys {
+            let Some((p, pin)) = view.get(e) else {
+                continue;
+            };
             // Components set through the World get the checks a scene file gets. A non-finite
             // velocity is not refused: the step quarantines the particle instead.
             let bad = |what: String| SimError::BadParticle { particle: e, what };
@@ -199,21 +381,53 @@ impl Packed {
                 return Err(bad(format!("position must be finite, got {}", p.position)));
             }
             let mass_ok = p.mass.is_finite() && p.mass > 0.0;
-            if !(pinned || mass_ok) {
+            if !(pin.is_some() || mass_ok) {
                 return Err(bad(format!("mass must be finite and > 0, got {}", p.mass)));
             }
-            index_of[id as usize] = i as u32;
-            packed.entities.push(e);
+        }
+        let mut springs: Vec<(Entity, Spring)> = world
+            .query::<(Entity, &Spring)>()
+            .iter()
+            .map(|(e, s)| (e, *s))
+            .collect();
+        springs.sort_unstable_by_key(|(e, _)| e.id());
+        for (e, s) in &springs {
+            for end in [s.a, s.b] {
+                if !world.satisfies::<&Particle>(end) {
+                    return Err(SimError::DanglingSpring { spring: *e, end });
+                }
+            }
+            let bad = |what: String| SimError::BadSpring { spring: *e, what };
+            if s.a == s.b {
+                return Err(bad("both ends are the same particle".into()));
+            }
+            check_spring(s.rest_length, s.stiffness, s.damping).map_err(bad)?;
+        }
+        let grids = locate_grids(world, &keys)?;
+
+        *self = Packed::default();
+        let n = keys.len();
+        let entities: Vec<Entity> = keys.iter().map(|k| k.2).collect();
+        drop(keys);
+        let mut packed = Packed {
+            x: Vec::with_capacity(n),
+            v: Vec::with_capacity(n),
+            inv_mass: Vec::with_capacity(n),
+            ..Default::default()
+        };
+        for &e in &entities {
+            let Some((p, pin)) = view.get(e) else {
+                continue;
+            };
+            let pinned = pin.is_some();
             packed.x.push(p.position);
             packed.v.push(if pinned { DVec3::ZERO } else { p.velocity });
-            packed
-                .mass
-                .push(if pinned { f64::INFINITY } else { p.mass });
             packed
                 .inv_mass
                 .push(if pinned { 0.0 } else { 1.0 / p.mass });
         }
-        packed.index_by_id = index_of;
+        drop(view);
+        packed.entities = entities;
         let lookup = |spring: Entity, end: Entity| -> Result<u32, SimError> {
             packed
                 .index_of(end)
@@ -221,59 +435,54 @@ impl Packed {
                 .ok_or(SimError::DanglingSpring { spring, end })
         };
 
-        let mut springs: Vec<(Entity, Spring)> = world
-            .query::<(Entity, &Spring)>()
-            .iter()
-            .map(|(e, s)| (e, *s))
-            .collect();
-        springs.sort_unstable_by_key(|(e, _)| e.id());
         let mut out = Vec::with_capacity(springs.len());
         for (e, s) in &springs {
             let (a, b) = (lookup(*e, s.a)?, lookup(*e, s.b)?);
-            let bad = |what: String| SimError::BadSpring { spring: *e, what };
-            if a == b {
-                return Err(bad("both ends are the same particle".into()));
-            }
-            if !(s.rest_length.is_finite() && s.rest_length > 0.0) {
-                return Err(bad(format!(
-                    "rest length must be finite and > 0, got {}",
-                    s.rest_length
-                )));
-            }
-            if !(s.stiffness.is_finite() && s.stiffness >= 0.0) {
-                return Err(bad(format!(
-                    "stiffness must be finite and ≥ 0, got {}",
-                    s.stiffness
-                )));
-            }
-            if !(s.damping.is_finite() && s.damping >= 0.0) {
-                return Err(bad(format!(
-                    "damping must be finite and ≥ 0, got {}",
-                    s.damping
-                )));
-            }
-            let (ma, mb) = (packed.mass[a as usize], packed.mass[b as usize]);
-            let mu = reduced_mass(ma, mb);
-            let (wa, wb) = if mu.is_finite() {
-                (mu / ma, mu / mb)
-            } else {
-                (0.0, 0.0)
-            };
-            out.push(PackedSpring {
+            out.push(PackedSpring::new(
                 a,
                 b,
-                rest: s.rest_length,
-                stiffness: s.stiffness,
-                damping: s.damping,
-                mu,
-                wa,
-                wb,
-            });
+                s.rest_length,
+                s.stiffness,
+                s.damping,
+                &packed.inv_mass,
+            ));
+        }
+        drop(springs);
+        if options.keep_grids {
+            packed.grids = grids;
+            let mut at = 0;
+            for g in &packed.grids {
+                if g.range().start > at {
+                    packed.loose.push(at..g.range().start);
+                }
+                at = g.range().end;
+            }
+            if at < n {
+                packed.loose.push(at..n);
+            }
+        } else {
+            out.reserve(grids.iter().map(PackedGrid::spring_count).sum());
+            for g in &grids {
+                out.extend(g.springs(&packed.inv_mass));
+            }
+            packed.loose.push(0..n);
         }
         packed.springs = out;
-        packed.build_incidence();
-        packed.colouring = Colouring::build(packed.x.len(), &packed.springs);
-        Ok(packed)
+        if !packed.springs.is_empty() {
+            packed.build_incidence();
+        }
+        if options.colouring {
+            packed.colouring = Colouring::build(packed.x.len(), &packed.springs);
+        }
+        *self = packed;
+        Ok(())
+    }
+
+    /// Rebuilds the incidence after `springs` was filled by hand.
+    pub(crate) fn rebuild_incidence(&mut self) {
+        self.loose.clear();
+        self.loose.push(0..self.x.len());
+        self.build_incidence();
     }
 
     fn build_incidence(&mut self) {
@@ -313,8 +522,9 @@ impl Packed {
 
     /// Writes positions and velocities back into the World's particles.
     pub fn scatter(&self, world: &mut World) {
-        for (e, p) in world.query_mut::<(Entity, &mut Particle)>() {
-            if let Some(i) = self.index_of(e) {
+        // Entity by entity, in packed order: no index map, and (unlike a view) no allocation.
+        for (i, &e) in self.entities.iter().enumerate() {
+            if let Ok(p) = world.query_one_mut::<&mut Particle>(e) {
                 p.position = self.x[i];
                 if self.inv_mass[i] != 0.0 {
                     p.velocity = self.v[i];
@@ -323,15 +533,99 @@ impl Packed {
         }
     }
 
-    /// The packed index of a particle entity, if it was packed.
+    /// The packed index of a particle entity, if it was packed. The map behind it is built on
+    /// first use (4 B per entity id), so a step that never asks costs nothing for it.
     pub fn index_of(&self, e: Entity) -> Option<usize> {
-        let i = *self.index_by_id.get(e.id() as usize)? as usize;
+        let map = self.index_by_id.get_or_init(|| {
+            let max_id = self.entities.iter().map(|e| e.id()).max();
+            let mut index_of = vec![u32::MAX; max_id.map_or(0, |m| m as usize + 1)];
+            for (i, e) in self.entities.iter().enumerate() {
+                index_of[e.id() as usize] = i as u32;
+            }
+            index_of
+        });
+        let i = *map.get(e.id() as usize)? as usize;
         (self.entities.get(i) == Some(&e)).then_some(i)
     }
 
-    /// Stretch `δ = |x_b − x_a| − l0` of spring `k`.
-    pub fn stretch(&self, k: usize) -> f64 {
-        let s = &self.springs[k];
+    /// Stretch `δ = |x_b − x_a| − l0` of spring `s`.
+    pub fn stretch(&self, s: &PackedSpring) -> f64 {
         (self.x[s.b as usize] - self.x[s.a as usize]).length() - s.rest
     }
+}
+
+/// The rest length, stiffness and damping a spring must have.
+fn check_spring(rest: f64, stiffness: f64, damping: f64) -> Result<(), String> {
+    if !(rest.is_finite() && rest > 0.0) {
+        return Err(format!("rest length must be finite and > 0, got {rest}"));
+    }
+    if !(stiffness.is_finite() && stiffness >= 0.0) {
+        return Err(format!("stiffness must be finite and ≥ 0, got {stiffness}"));
+    }
+    if !(damping.is_finite() && damping >= 0.0) {
+        return Err(format!("damping must be finite and ≥ 0, got {damping}"));
+    }
+    Ok(())
+}
+
+/// Checks every [`ClothSprings`] and finds its particles among the sorted gather keys (scene
+/// index, id, entity): the grid's scene indices must each belong to exactly one particle, and
+/// no two grids may share a particle.
+fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<PackedGrid>, SimError> {
+    let mut grids = Vec::new();
+    let mut cloths: Vec<(Entity, ClothSprings)> = world
+        .query::<(Entity, &ClothSprings)>()
+        .iter()
+        .map(|(e, c)| (e, c.clone()))
+        .collect();
+    cloths.sort_unstable_by_key(|(e, c)| (c.first, e.id()));
+    let mut end = 0u64;
+    for (e, c) in cloths {
+        let bad = |what: String| SimError::BadCloth { cloth: e, what };
+        if c.cols == 0 || c.rows == 0 {
+            return Err(bad(format!(
+                "grid must be at least 1 × 1, got {} × {}",
+                c.cols, c.rows
+            )));
+        }
+        let range = c.range();
+        if range.end > u32::MAX as u64 {
+            return Err(bad(format!("scene indices {range:?} overflow u32")));
+        }
+        if range.start < end {
+            return Err(bad(format!(
+                "scene indices {range:?} overlap another cloth's springs"
+            )));
+        }
+        end = range.end;
+        for (k, l) in c.links.iter().enumerate() {
+            if l.offset == (0, 0) {
+                return Err(bad(format!("links[{k}]: offset must not be (0, 0)")));
+            }
+            check_spring(l.rest_length, l.stiffness, l.damping)
+                .map_err(|w| bad(format!("links[{k}]: {w}")))?;
+        }
+        let base = keys.partition_point(|k| (k.0 as u64) < range.start);
+        let count = (range.end - range.start) as usize;
+        let run = keys.get(base..base + count).unwrap_or(&[]);
+        let next = keys.get(base + count).map(|k| k.0 as u64);
+        let broken = (0..count as u64)
+            .find(|&k| run.get(k as usize).map(|r| r.0 as u64) != Some(range.start + k))
+            .map(|k| range.start + k)
+            .or((next == Some(range.end - 1)).then_some(range.end - 1));
+        if let Some(index) = broken {
+            return Err(SimError::BrokenCloth {
+                cloth: e,
+                index: index as u32,
+            });
+        }
+        grids.push(PackedGrid {
+            entity: e,
+            base: base as u32,
+            cols: c.cols,
+            rows: c.rows,
+            links: c.links,
+        });
+    }
+    Ok(grids)
 }

@@ -47,3 +47,51 @@ pub struct Spring {
 /// particles without it follow, in spawn order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub struct SceneIndex(pub u32);
+
+/// A cloth's springs as one component: the particles with scene indices `first ..
+/// first + cols·rows` form a `cols × rows` grid (row-major), and each [`GridLink`] joins every
+/// particle `(c, r)` to `(c + dc, r + dr)` where that exists. The topology is implicit, so the
+/// springs cost no memory each; scene cloths are built this way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClothSprings {
+    /// Scene index of particle `(0, 0)`.
+    pub first: u32,
+    pub cols: u32,
+    pub rows: u32,
+    pub links: Vec<GridLink>,
+}
+
+/// One spring of every grid cell: from `(c, r)` to `(c + offset.0, r + offset.1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridLink {
+    /// `(dc, dr)`, not both 0.
+    pub offset: (i32, i32),
+    /// m, > 0.
+    pub rest_length: f64,
+    /// κ, N/m, ≥ 0.
+    pub stiffness: f64,
+    /// c, N·s/m, ≥ 0.
+    pub damping: f64,
+}
+
+impl ClothSprings {
+    /// Scene indices covered, `first .. first + cols·rows`.
+    pub fn range(&self) -> std::ops::Range<u64> {
+        let first = self.first as u64;
+        first..first + self.cols as u64 * self.rows as u64
+    }
+
+    /// The springs of link `l`: `(cols − |dc|)·(rows − |dr|)` when that is positive.
+    pub fn link_count(&self, l: &GridLink) -> u64 {
+        let (dc, dr) = (
+            l.offset.0.unsigned_abs() as u64,
+            l.offset.1.unsigned_abs() as u64,
+        );
+        (self.cols as u64).saturating_sub(dc) * (self.rows as u64).saturating_sub(dr)
+    }
+
+    /// Springs in all.
+    pub fn spring_count(&self) -> u64 {
+        self.links.iter().map(|l| self.link_count(l)).sum()
+    }
+}

@@ -467,7 +467,7 @@ impl ContactStage {
             let com = pose.transform_point(body.local_center_of_mass()).as_dvec3();
             let vb =
                 body.linvel().as_dvec3() + body.angvel().as_dvec3().cross(target.as_dvec3() - com);
-            let m = packed.mass[i];
+            let m = packed.mass(i);
             if m.is_finite() && body.is_dynamic() {
                 let j = m * (vb - packed.v[i]);
                 body.apply_impulse_at_point(-j.as_vec3(), target, true);
@@ -556,14 +556,8 @@ impl ContactStage {
         self.near.clear();
         self.near.resize(chunks * nc, false);
         let (candidates, held) = (&self.candidates, &self.held);
-        let Packed {
-            x,
-            v,
-            inv_mass,
-            mass,
-            ..
-        } = packed;
-        let (inv_mass, mass) = (&inv_mass[..], &mass[..]);
+        let Packed { x, v, inv_mass, .. } = packed;
+        let inv_mass = &inv_mass[..];
         // One pass over particles in fixed chunks; each chunk sums its impulses per collider,
         // then the sums are added in chunk order: the same result whatever the thread count.
         // Below the parallel threshold the chunks are not split: rayon's fork costs more than
@@ -655,7 +649,7 @@ impl ContactStage {
                         *vi = vb + new;
                         if cand.dynamic {
                             // The body gets −J at the contact point: force and torque.
-                            let j = mass[i] * (*vi - old);
+                            let j = (*vi - old) / inv_mass[i];
                             sum.impulse -= j;
                             sum.torque -= (hit.point - cand.com).cross(j);
                         }
@@ -739,11 +733,11 @@ mod device {
         /// Per packed particle, the mass the device stage uses: 0 for pinned or attached.
         pub fn device_masses(&self, packed: &Packed) -> Vec<f32> {
             packed
-                .mass
+                .inv_mass
                 .iter()
-                .zip(&packed.inv_mass)
                 .enumerate()
-                .map(|(i, (&m, &w))| {
+                .map(|(i, &w)| {
+                    let m = packed.mass(i);
                     let held = self.stage.held.get(i).copied().unwrap_or(false);
                     if w == 0.0 || held {
                         0.0

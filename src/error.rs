@@ -87,6 +87,14 @@ pub enum SimError {
     BadSpring { spring: Entity, what: String },
     #[error("spring {spring:?} refers to {end:?}, which is not a particle")]
     DanglingSpring { spring: Entity, end: Entity },
+    #[error("cloth springs {cloth:?}: {what}")]
+    BadCloth { cloth: Entity, what: String },
+    #[error(
+        "cloth springs {cloth:?} reach scene index {index}, which no particle has (or more than one has)"
+    )]
+    BrokenCloth { cloth: Entity, index: u32 },
+    #[error("{0} does not step cloth grids kept whole (gather with them expanded)")]
+    GridsUnsupported(crate::integrate::Integrator),
     #[error(
         "harmonic-paper is undefined for spring {spring}: eq. 27 as printed takes √(1 − 2ζ²) with ζ = {zeta:.3} > 0.707"
     )]

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::buffers::Packed;
+use crate::buffers::{Packed, PackedSpring};
 
 use crate::integrate::par::PAR_MIN;
 
@@ -14,26 +14,26 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
         if packed.inv_mass[i] == 0.0 {
             0.0
         } else {
-            let m = packed.mass[i];
+            let m = packed.mass(i);
             0.5 * m * packed.v[i].length_squared() - m * gravity.dot(packed.x[i])
         }
     };
-    let spring = |k: usize| {
-        let d = packed.stretch(k);
-        0.5 * packed.springs[k].stiffness * d * d
+    let spring = |s: PackedSpring| {
+        let d = packed.stretch(&s);
+        0.5 * s.stiffness * d * d
     };
-    let (n, m) = (packed.particle_count(), packed.springs.len());
+    let (n, m) = (packed.particle_count(), packed.spring_count());
     if n + m < PAR_MIN {
-        (0..n).map(particle).sum::<f64>() + (0..m).map(spring).sum::<f64>()
+        (0..n).map(particle).sum::<f64>() + packed.all_springs().map(spring).sum::<f64>()
     } else {
         (0..n).into_par_iter().map(particle).sum::<f64>()
-            + (0..m).into_par_iter().map(spring).sum::<f64>()
+            + packed.par_springs().map(spring).sum::<f64>()
     }
 }
 
 /// Largest `|δ|/l0` over all springs; NaN if any spring's is.
 pub fn max_strain(packed: &Packed) -> f64 {
-    let strain = |k: usize| packed.stretch(k).abs() / packed.springs[k].rest;
+    let strain = |s: PackedSpring| packed.stretch(&s).abs() / s.rest;
     // Unlike f64::max, keeps a NaN so a broken state cannot report a small strain.
     let max = |a: f64, b: f64| {
         if a.is_nan() || b.is_nan() {
@@ -42,19 +42,17 @@ pub fn max_strain(packed: &Packed) -> f64 {
             a.max(b)
         }
     };
-    let m = packed.springs.len();
-    if m < PAR_MIN {
-        (0..m).map(strain).fold(0.0, max)
+    if packed.spring_count() < PAR_MIN {
+        packed.all_springs().map(strain).fold(0.0, max)
     } else {
-        (0..m).into_par_iter().map(strain).reduce(|| 0.0, max)
+        packed.par_springs().map(strain).reduce(|| 0.0, max)
     }
 }
 
 /// `h/h_c` of the stiffest spring, `h_c = π/ω0`, and that spring's index.
 pub fn worst_step_ratio(packed: &Packed, h: f64) -> Option<(f64, usize)> {
     packed
-        .springs
-        .iter()
+        .all_springs()
         .enumerate()
         .map(|(k, s)| (h * s.omega0_sq().sqrt() / std::f64::consts::PI, k))
         .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -85,6 +83,6 @@ pub fn non_finite_count(packed: &Packed) -> usize {
 pub fn momentum(packed: &Packed) -> DVec3 {
     (0..packed.particle_count())
         .filter(|&i| packed.inv_mass[i] != 0.0)
-        .map(|i| packed.mass[i] * packed.v[i])
+        .map(|i| packed.mass(i) * packed.v[i])
         .sum()
 }

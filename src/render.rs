@@ -577,7 +577,7 @@ impl Renderer {
         self.strain.resize(sim.positions().len(), 0.0);
         if style.strain {
             let packed = sim.packed();
-            for s in &packed.springs {
+            for s in packed.all_springs() {
                 let (a, b) = (s.a as usize, s.b as usize);
                 if s.rest <= 0.0 {
                     continue;
@@ -666,7 +666,7 @@ impl Renderer {
                 }
             }
             let packed = sim.packed();
-            for s in &packed.springs {
+            for s in packed.all_springs() {
                 for i in [s.a, s.b] {
                     let x = packed.x[i as usize].as_vec3();
                     self.line_vertices.push(Vertex {
@@ -730,9 +730,9 @@ fn rope_marker(sim: &Simulation) -> Option<f32> {
     if packed.x.is_empty() || packed.x.len() > 20_000 {
         return None;
     }
-    let n = packed.springs.len();
+    let n = packed.spring_count();
     if n > 0 {
-        let mean = packed.springs.iter().map(|s| s.rest).sum::<f64>() / n as f64;
+        let mean = packed.all_springs().map(|s| s.rest).sum::<f64>() / n as f64;
         if mean > 0.0 {
             return Some((0.25 * mean) as f32);
         }

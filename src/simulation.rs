@@ -7,8 +7,9 @@ use glam::{DVec3, Vec3};
 use hecs::{Entity, World};
 
 use crate::backend::Backend;
-use crate::buffers::Packed;
-use crate::components::{Pin, Quarantined, SceneIndex};
+use crate::buffers::{GatherOptions, Packed};
+use crate::components::{ClothSprings, Pin, Quarantined, SceneIndex};
+use crate::scene::ClothGrid;
 use rapier3d::prelude::{ColliderSet, RigidBodySet};
 
 use crate::contacts::{ContactStage, ContactStats, Props};
@@ -114,8 +115,8 @@ pub struct Simulation {
     frame: Frame,
     /// Particles held by [`Simulation::grab`] that were free before.
     grabbed: Vec<Entity>,
-    /// The cloths as units: each one's particles, a range of scene indices.
-    cloths: Vec<(ClothId, std::ops::Range<u32>)>,
+    /// The cloths as units: each one's grid of particles (scene indices).
+    cloths: Vec<(ClothId, ClothGrid)>,
     next_cloth: u32,
     /// Particles found non-finite during the current frame (packed indices, may repeat).
     contained: Vec<usize>,
@@ -169,7 +170,9 @@ struct Frame {
     max_steps: u32,
     /// The state before the last step of the last advance.
     prev: Vec<DVec3>,
-    triangles: Vec<[u32; 3]>,
+    /// Triangles set by the caller; otherwise the cloths' grids, made when first asked for.
+    custom: Option<Vec<[u32; 3]>>,
+    triangles: std::sync::OnceLock<Vec<[u32; 3]>>,
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
 }
@@ -180,7 +183,8 @@ impl Default for Frame {
             accumulator: 0.0,
             max_steps: 8,
             prev: Vec::new(),
-            triangles: Vec::new(),
+            custom: None,
+            triangles: std::sync::OnceLock::new(),
             positions: Vec::new(),
             normals: Vec::new(),
         }
@@ -426,9 +430,8 @@ impl Simulation {
         }
         let built = scene.build();
         let mut sim = Self::with_props(built.world, built.config, built.props)?;
-        sim.frame.triangles = built.triangles;
-        for range in built.cloths {
-            sim.cloths.push((ClothId(sim.next_cloth), range));
+        for grid in built.cloths {
+            sim.cloths.push((ClothId(sim.next_cloth), grid));
             sim.next_cloth += 1;
         }
         Ok(sim)
@@ -479,7 +482,12 @@ impl Simulation {
     /// in none), and the triangles: ready for a vertex buffer, without allocation after the
     /// first frame.
     pub fn render(&mut self, alpha: f64) -> RenderView<'_> {
+        self.triangles();
         let f = &mut self.frame;
+        let triangles: &[[u32; 3]] = match &f.custom {
+            Some(t) => t,
+            None => f.triangles.get().map_or(&[], |t| t),
+        };
         let x = &self.packed.x;
         let prev = if f.prev.len() == x.len() { &f.prev } else { x };
         f.positions.clear();
@@ -488,7 +496,7 @@ impl Simulation {
         f.normals.clear();
         f.normals.resize(x.len(), Vec3::ZERO);
         let n = f.positions.len() as u32;
-        for t in &f.triangles {
+        for t in triangles {
             if t.iter().any(|&i| i >= n) {
                 continue;
             }
@@ -505,18 +513,27 @@ impl Simulation {
         RenderView {
             positions: &f.positions,
             normals: &f.normals,
-            triangles: &f.triangles,
+            triangles,
         }
     }
 
     /// The triangles drawn by [`Self::render`]: the cloths' from a scene, or your own mesh
     /// over the particles (scene-order indices).
     pub fn triangles(&self) -> &[[u32; 3]] {
-        &self.frame.triangles
+        if let Some(t) = &self.frame.custom {
+            return t;
+        }
+        self.frame.triangles.get_or_init(|| {
+            let mut out = Vec::new();
+            for (_, grid) in &self.cloths {
+                grid.triangles(&mut out);
+            }
+            out
+        })
     }
 
     pub fn set_triangles(&mut self, triangles: Vec<[u32; 3]>) {
-        self.frame.triangles = triangles;
+        self.frame.custom = Some(triangles);
     }
 
     /// Loads, validates and builds a scene file.
@@ -749,16 +766,31 @@ impl Simulation {
         Ok(())
     }
 
+    /// What the step needs packed: cloth grids kept whole for an integrator with a grid pass
+    /// on the CPU, the colouring only for the sweeping integrators and the GPU.
+    fn gather_options(&self) -> GatherOptions {
+        #[cfg(feature = "gpu")]
+        let gpu = self.gpu.is_some();
+        #[cfg(not(feature = "gpu"))]
+        let gpu = false;
+        GatherOptions {
+            keep_grids: !gpu && self.config.integrator.runs_on_grids(),
+            colouring: gpu || self.config.integrator.needs_colouring(),
+        }
+    }
+
     fn gather(&mut self) -> Result<(), SimError> {
-        self.packed = Packed::gather(&self.world)?;
+        let options = self.gather_options();
+        // In place: the old buffers go before the new ones are made (never two copies), and
+        // only once the World is known to be sound (an error leaves them as they were).
+        self.packed.regather(&self.world, options)?;
         // Frozen before anything reads them: particles with a velocity set non-finite from
         // outside, and the free ends of springs beyond f32's range (the device's precision,
         // where they turn non-finite at once; the CPU does the same so the back ends agree).
         let over = |v: f64| v > f32::MAX as f64;
         let p = &self.packed;
         self.contained.extend(
-            p.springs
-                .iter()
+            p.all_springs()
                 .filter(|s| over(s.stiffness) || over(s.damping))
                 .flat_map(|s| [s.a as usize, s.b as usize])
                 .filter(|&i| p.inv_mass[i] != 0.0),
@@ -766,7 +798,7 @@ impl Simulation {
         contain(&mut self.packed, &self.world, &mut self.contained);
         if !self.contained.is_empty() {
             self.quarantine();
-            self.packed = Packed::gather(&self.world)?;
+            self.packed.regather(&self.world, options)?;
         }
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
@@ -830,7 +862,7 @@ impl Simulation {
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
         self.cloths
             .iter()
-            .map(|(id, r)| (*id, r.start as usize..r.end as usize))
+            .map(|(id, g)| (*id, g.first as usize..g.range().end as usize))
     }
 
     /// Adds a cloth, validated as a scene's would be, after every particle of the scene
@@ -846,12 +878,14 @@ impl Simulation {
             .map(|i| i.0 + 1)
             .max()
             .unwrap_or(0);
-        let triangles = crate::scene::spawn_cloth(&mut self.world, first, cloth);
-        let end = first + cloth.resolution.0 * cloth.resolution.1;
-        self.frame.triangles.extend(triangles);
+        let grid = crate::scene::spawn_cloth(&mut self.world, first, cloth);
+        if let Some(custom) = &mut self.frame.custom {
+            grid.triangles(custom);
+        }
+        self.frame.triangles.take();
         let id = ClothId(self.next_cloth);
         self.next_cloth += 1;
-        self.cloths.push((id, first..end));
+        self.cloths.push((id, grid));
         self.dirty = true;
         Ok(id)
     }
@@ -864,7 +898,8 @@ impl Simulation {
             .iter()
             .position(|(c, _)| *c == id)
             .ok_or(SimError::UnknownCloth)?;
-        let (_, range) = self.cloths.remove(k);
+        let (_, grid) = self.cloths.remove(k);
+        let range = grid.range();
         let n = range.end - range.start;
         let doomed: std::collections::HashSet<Entity> = self
             .world
@@ -873,13 +908,23 @@ impl Simulation {
             .filter(|(_, i)| range.contains(&i.0))
             .map(|(e, _)| e)
             .collect();
-        let springs: Vec<Entity> = self
+        let mut springs: Vec<Entity> = self
             .world
             .query::<(Entity, &crate::Spring)>()
             .iter()
             .filter(|(_, s)| doomed.contains(&s.a) || doomed.contains(&s.b))
             .map(|(e, _)| e)
             .collect();
+        // Cloth springs over any of its particles go too; later ones move up with theirs.
+        let (lo, hi) = (range.start as u64, range.end as u64);
+        for (e, c) in self.world.query_mut::<(Entity, &mut ClothSprings)>() {
+            let r = c.range();
+            if r.start < hi && lo < r.end {
+                springs.push(e);
+            } else if r.start >= hi {
+                c.first -= n;
+            }
+        }
         for e in springs.into_iter().chain(doomed.iter().copied()) {
             let _ = self.world.despawn(e);
         }
@@ -889,19 +934,20 @@ impl Simulation {
                 i.0 -= n;
             }
         }
-        self.frame
-            .triangles
-            .retain(|t| !t.iter().any(|i| range.contains(i)));
-        for t in &mut self.frame.triangles {
-            for i in t.iter_mut() {
-                if *i >= range.end {
-                    *i -= n;
+        if let Some(custom) = &mut self.frame.custom {
+            custom.retain(|t| !t.iter().any(|i| range.contains(i)));
+            for t in custom.iter_mut() {
+                for i in t.iter_mut() {
+                    if *i >= range.end {
+                        *i -= n;
+                    }
                 }
             }
         }
-        for (_, r) in &mut self.cloths {
-            if r.start >= range.end {
-                *r = r.start - n..r.end - n;
+        self.frame.triangles.take();
+        for (_, g) in &mut self.cloths {
+            if g.first >= range.end {
+                g.first -= n;
             }
         }
         self.frame.prev.clear();
@@ -1003,6 +1049,18 @@ impl Simulation {
         self.config = config;
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
+        }
+        let options = self.gather_options();
+        let packed_as = GatherOptions {
+            keep_grids: !self.packed.grids.is_empty(),
+            colouring: self.packed.colouring.colours() > 0,
+        };
+        if options.keep_grids != packed_as.keep_grids
+            || (options.colouring && !packed_as.colouring && !self.packed.springs.is_empty())
+        {
+            // The new integrator or back end takes the cloths in another form.
+            self.dirty = true;
+            return self.gather();
         }
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;

@@ -256,7 +256,7 @@ pub fn run(
 fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
     let free: f64 = (0..packed.particle_count())
         .filter(|&i| packed.inv_mass[i] != 0.0)
-        .map(|i| packed.mass[i])
+        .map(|i| packed.mass(i))
         .sum();
     let (lo, hi) = packed
         .x
@@ -675,7 +675,7 @@ pub fn cloth_case(n: u32, zeta: f64, start: Start) -> (Scene, f64) {
                     mass: if p.inv_mass[i] == 0.0 {
                         scene.cloths[0].mass / (n * n) as f64
                     } else {
-                        p.mass[i]
+                        p.mass(i)
                     },
                     pinned: p.inv_mass[i] == 0.0,
                 })

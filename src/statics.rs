@@ -50,7 +50,7 @@ fn relax_at(packed: &Packed, gravity: DVec3, tol: f64, max_iter: usize, h: f64) 
     let ke = |p: &Packed| {
         (0..p.particle_count())
             .filter(|&i| p.inv_mass[i] != 0.0)
-            .map(|i| p.mass[i] * p.v[i].length_squared())
+            .map(|i| p.mass(i) * p.v[i].length_squared())
             .sum::<f64>()
     };
     let mut before = p.x.clone();

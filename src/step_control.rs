@@ -8,12 +8,102 @@
 
 use glam::DVec3;
 
-use crate::buffers::Packed;
+use crate::buffers::{Packed, PackedSpring};
 use crate::integrate::Integrator;
 
 /// Largest natural angular frequency of the spring network (rad/s), by power iteration on
-/// `M⁻¹K`; 0 without free, stiff springs.
+/// `M⁻¹K`; 0 without free, stiff springs. Each cloth grid kept whole takes part through a
+/// window of at most [`WINDOW`]² particles around its stiffest particle (largest `Σκ/m`), its
+/// neighbours outside held fixed: a principal submatrix, so the estimate stays a lower bound,
+/// and the scratch stays small however large the cloth.
 pub fn network_frequency(packed: &Packed, iterations: usize) -> f64 {
+    if packed.grids.is_empty() {
+        power_iteration(packed, iterations)
+    } else {
+        power_iteration(&windowed(packed), iterations)
+    }
+}
+
+/// Side of the window through which a large cloth grid enters the frequency estimate.
+pub const WINDOW: u32 = 64;
+
+/// The network with every grid cut down to its window, as explicit springs.
+fn windowed(packed: &Packed) -> Packed {
+    // Packed index → index in the window network.
+    let mut map = std::collections::HashMap::new();
+    let mut out = Packed::default();
+    let mut add = |out: &mut Packed, i: usize, pinned: bool| -> u32 {
+        *map.entry(i).or_insert_with(|| {
+            out.x.push(packed.x[i]);
+            out.v.push(packed.v[i]);
+            out.inv_mass
+                .push(if pinned { 0.0 } else { packed.inv_mass[i] });
+            (out.x.len() - 1) as u32
+        })
+    };
+    let mut pending = Vec::new();
+    for g in &packed.grids {
+        let (cols, rows) = (g.cols as usize, g.rows as usize);
+        let at = |c: usize, r: usize| g.base as usize + r * cols + c;
+        // The stiffest particle, the one nearest the centre among equals.
+        let score = |c: usize, r: usize| {
+            let mut k = 0.0;
+            for l in &g.links {
+                let (dc, dr) = (l.offset.0 as isize, l.offset.1 as isize);
+                for s in [1, -1] {
+                    let (cc, rr) = (c as isize + s * dc, r as isize + s * dr);
+                    if cc >= 0 && rr >= 0 && (cc as usize) < cols && (rr as usize) < rows {
+                        k += l.stiffness;
+                    }
+                }
+            }
+            k * packed.inv_mass[at(c, r)]
+        };
+        let centre = |c: usize, r: usize| c.abs_diff(cols / 2) + r.abs_diff(rows / 2);
+        let (mut best, mut pick) = (f64::NEG_INFINITY, (0, 0));
+        for r in 0..rows {
+            for c in 0..cols {
+                let s = score(c, r);
+                if s > best || (s == best && centre(c, r) < centre(pick.0, pick.1)) {
+                    (best, pick) = (s, (c, r));
+                }
+            }
+        }
+        let w = WINDOW as usize;
+        let c0 = pick.0.saturating_sub(w / 2).min(cols.saturating_sub(w));
+        let r0 = pick.1.saturating_sub(w / 2).min(rows.saturating_sub(w));
+        let inside = |c: usize, r: usize| (c0..c0 + w).contains(&c) && (r0..r0 + w).contains(&r);
+        for s in g.springs(&packed.inv_mass) {
+            let (a, b) = (
+                s.a as usize - g.base as usize,
+                s.b as usize - g.base as usize,
+            );
+            let (ia, ib) = (inside(a % cols, a / cols), inside(b % cols, b / cols));
+            if ia || ib {
+                pending.push((s, !ia, !ib));
+            }
+        }
+    }
+    for s in &packed.springs {
+        pending.push((*s, false, false));
+    }
+    for (s, fix_a, fix_b) in pending {
+        let a = add(&mut out, s.a as usize, fix_a);
+        let b = add(&mut out, s.b as usize, fix_b);
+        out.springs.push(PackedSpring::new(
+            a,
+            b,
+            s.rest,
+            s.stiffness,
+            s.damping,
+            &out.inv_mass,
+        ));
+    }
+    out.rebuild_incidence();
+    out
+}
+
+fn power_iteration(packed: &Packed, iterations: usize) -> f64 {
     let n = packed.particle_count();
     if packed.springs.is_empty() || n == 0 {
         return 0.0;
@@ -119,15 +209,14 @@ pub struct StepChoice {
 /// Substeps for a frame of `dt` with `integrator` on this network.
 pub fn choose(packed: &Packed, integrator: Integrator, dt: f64) -> StepChoice {
     let w0_max = packed
-        .springs
-        .iter()
+        .all_springs()
         .map(|s| s.omega0_sq())
         .fold(0.0, f64::max)
         .sqrt();
     // The network is at least as fast as its stiffest spring; power iteration approaches the
     // top from below, so take the larger.
     let omega_max = network_frequency(packed, 100).max(w0_max);
-    let active = packed.springs.iter().filter(|s| s.omega0_sq() > 0.0);
+    let active = packed.all_springs().filter(|s| s.omega0_sq() > 0.0);
     let zeta_range = active
         .map(|s| s.zeta())
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), z| {
@@ -169,8 +258,7 @@ pub fn choose(packed: &Packed, integrator: Integrator, dt: f64) -> StepChoice {
 /// `h = n h_c` the closed form's impulse vanishes (even n) or reverses the stretch rate (odd n).
 pub fn aliasing(packed: &Packed, h: f64, tolerance: f64) -> Option<(usize, f64)> {
     packed
-        .springs
-        .iter()
+        .all_springs()
         .enumerate()
         .map(|(k, s)| (k, h * s.omega0_sq().sqrt() / std::f64::consts::PI))
         .filter(|&(_, r)| r >= 0.5 && (r - r.round()).abs() <= tolerance * r)

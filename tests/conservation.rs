@@ -46,7 +46,7 @@ fn momentum(sim: &Simulation) -> (DVec3, f64) {
     let p = sim.packed();
     let total = harmonic::metrics::momentum(p);
     let scale = (0..p.particle_count())
-        .map(|i| p.mass[i] * p.v[i].length())
+        .map(|i| p.mass(i) * p.v[i].length())
         .sum();
     (total, scale)
 }

@@ -75,7 +75,7 @@ fn a_free_collision_conserves_linear_momentum() {
     let mut sim = Simulation::from_scene(&scene).expect("builds");
     let momentum = |sim: &Simulation| {
         let p = sim.packed();
-        let cloth: DVec3 = p.v.iter().zip(&p.mass).map(|(v, m)| *v * *m).sum();
+        let cloth: DVec3 = (0..p.particle_count()).map(|i| p.v[i] * p.mass(i)).sum();
         let props = sim.props().expect("props");
         let (_, ball) = props.bodies().iter().next().expect("one body");
         (cloth, ball.linvel().as_dvec3() * ball.mass() as f64)
@@ -239,7 +239,7 @@ fn a_cloth_couples_with_the_callers_own_rapier_sets() {
     );
     let momentum = |sim: &Simulation, world: &PhysicsWorld| {
         let p = sim.packed();
-        let cloth: DVec3 = p.v.iter().zip(&p.mass).map(|(v, m)| *v * *m).sum();
+        let cloth: DVec3 = (0..p.particle_count()).map(|i| p.v[i] * p.mass(i)).sum();
         let b = &world.bodies[ball];
         cloth + b.linvel().as_dvec3() * b.mass() as f64
     };

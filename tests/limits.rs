@@ -75,7 +75,7 @@ fn spring_and_substep_limits_are_checked() {
     let scene = Scene::parse(&cloth(20), "c.ron").unwrap();
     let sim = Simulation::from_scene(&scene).unwrap();
     assert_eq!(
-        sim.packed().springs.len(),
+        sim.packed().spring_count(),
         2202,
         "spring_count matches the build"
     );

@@ -497,7 +497,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     };
 
     let packed = sim.packed();
-    let (n, m) = (packed.particle_count(), packed.springs.len());
+    let (n, m) = (packed.particle_count(), packed.spring_count());
     let start = sim.diagnostics();
     let ratio = harmonic::metrics::worst_step_ratio(packed, config.h());
     println!(

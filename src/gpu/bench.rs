@@ -139,7 +139,7 @@ pub fn scaling(
         let (gpu, bytes) = gpu_rate(&mut sim, repeats)?;
         // A frame with the read back: the state after the timed substeps must be finite.
         sim.step()?;
-        let (particles, springs) = (sim.packed().particle_count(), sim.packed().springs.len());
+        let (particles, springs) = (sim.packed().particle_count(), sim.packed().spring_count());
         drop(sim);
         let cpu = if n <= cpu_max {
             progress(&format!("{n}×{n} CPU"));

@@ -99,8 +99,8 @@ impl Implicit {
                     packed.incidence.offsets[i] as usize,
                     packed.incidence.offsets[i + 1] as usize,
                 );
-                let mut f = packed.mass[i] * g;
-                let mut diag = DVec3::splat(packed.mass[i]);
+                let mut f = packed.mass(i) * g;
+                let mut diag = DVec3::splat(packed.mass(i));
                 for e in lo..hi {
                     let k = packed.incidence.spring[e] as usize;
                     let sign = packed.incidence.coef[e].signum();
@@ -191,7 +191,7 @@ impl Implicit {
             }
             // (A p)_b gets +B(p_b − p_a), (A p)_a gets −B(p_b − p_a).
             let (lo, hi) = (inc.offsets[i] as usize, inc.offsets[i + 1] as usize);
-            let mut sum = packed.mass[i] * p[i];
+            let mut sum = packed.mass(i) * p[i];
             for e in lo..hi {
                 sum += inc.coef[e].signum() * term[inc.spring[e] as usize];
             }

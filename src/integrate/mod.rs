@@ -1,6 +1,7 @@
 #![doc = include_str!("MATH.md")]
 
 mod gauss_seidel;
+mod grid;
 pub mod harmonic;
 pub mod implicit;
 pub mod paper;
@@ -62,6 +63,26 @@ impl Integrator {
         Integrator::Rk4,
     ];
 
+    /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are, with no
+    /// memory per spring; the others get the cloths' springs expanded one by one.
+    pub fn runs_on_grids(self) -> bool {
+        matches!(
+            self,
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler
+        )
+    }
+
+    /// Whether it sweeps the springs in colour order.
+    pub fn needs_colouring(self) -> bool {
+        matches!(
+            self,
+            Integrator::HarmonicGs
+                | Integrator::HarmonicSgs
+                | Integrator::HarmonicForcedGs
+                | Integrator::Xpbd
+        )
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             Integrator::Harmonic => "harmonic",
@@ -103,6 +124,11 @@ pub fn runs_parallel(packed: &Packed) -> bool {
     packed.particle_count() >= par::PAR_MIN || packed.springs.len() >= par::PAR_MIN
 }
 
+/// Bands per large cloth grid in the grid pass: two per thread, for balance.
+fn grid_bands() -> usize {
+    2 * rayon::current_num_threads()
+}
+
 /// How a spring's relative velocity change is computed in the spring pass.
 #[derive(Clone, Copy)]
 enum Law<'a> {
@@ -114,7 +140,7 @@ enum Law<'a> {
 
 /// How the particle pass turns summed velocity changes into a new state.
 #[derive(Clone, Copy, PartialEq)]
-enum Update {
+pub(crate) enum Update {
     /// `v += Δv + g h; x += h v` (symplectic Euler, plain harmonic).
     VelocityFirst,
     /// `x += h v; v += Δv + g h`.
@@ -148,6 +174,7 @@ pub struct Solver {
     force: Vec<f64>,
     implicit: implicit::Implicit,
     xpbd: xpbd::Xpbd,
+    grid: grid::GridPass,
 }
 
 impl Solver {
@@ -169,6 +196,7 @@ impl Solver {
             force: Vec::new(),
             implicit: implicit::Implicit::default(),
             xpbd: xpbd::Xpbd::default(),
+            grid: grid::GridPass::default(),
         }
     }
 
@@ -190,6 +218,12 @@ impl Solver {
         let n = packed.particle_count();
         if self.h == h && self.sized_for == (n, m) {
             return Ok(());
+        }
+        if !packed.grids.is_empty() && !self.integrator.runs_on_grids() {
+            return Err(SimError::GridsUnsupported(self.integrator));
+        }
+        if !packed.grids.is_empty() {
+            self.grid.prepare(packed, h, grid_bands());
         }
         self.sdv.resize(m, DVec3::ZERO);
         let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
@@ -263,8 +297,8 @@ impl Solver {
                         });
                         continue;
                     }
-                    let ma = packed.mass[s.a as usize];
-                    let mb = packed.mass[s.b as usize];
+                    let ma = packed.mass(s.a as usize);
+                    let mb = packed.mass(s.b as usize);
                     let p = PaperSpring::new(s.stiffness, s.damping, ma, mb).map_err(|e| {
                         SimError::PaperUndefined {
                             spring: k,
@@ -311,6 +345,9 @@ impl Solver {
                     false,
                 );
                 particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
+                if !packed.grids.is_empty() {
+                    self.grid.run(packed, &self.sdv, g, h, update);
+                }
             }
             Integrator::HarmonicPaper => {
                 spring_pass(
@@ -446,15 +483,20 @@ impl Solver {
     }
 }
 
-/// Geometry of one spring: unit axis `n`, stretch `δ` and stretch rate `δ̇`.
+/// Geometry of one spring from `a` to `b`: unit axis `n`, stretch `δ` and stretch rate `δ̇`.
 #[inline(always)]
-fn stretch(s: &PackedSpring, x: &[DVec3], va: DVec3, vb: DVec3) -> (DVec3, f64, f64) {
-    let d = x[s.b as usize] - x[s.a as usize];
+pub(crate) fn axial(xa: DVec3, xb: DVec3, va: DVec3, vb: DVec3, rest: f64) -> (DVec3, f64, f64) {
+    let d = xb - xa;
     let len = d.length();
     let n = d / len;
-    let delta = len - s.rest;
+    let delta = len - rest;
     let delta_dot = n.dot(vb - va);
     (n, delta, delta_dot)
+}
+
+#[inline(always)]
+fn stretch(s: &PackedSpring, x: &[DVec3], va: DVec3, vb: DVec3) -> (DVec3, f64, f64) {
+    axial(x[s.a as usize], x[s.b as usize], va, vb, s.rest)
 }
 
 /// The unit axis `n` and `φ = p δ + q δ̇` of one spring: the hot line of every Jacobi and
@@ -552,7 +594,7 @@ fn spring_pass(
     }
 }
 
-/// Pass 2: each particle gathers its springs' changes and moves.
+/// Pass 2: each particle in no grid gathers its springs' changes and moves.
 fn particle_pass(
     packed: &mut Packed,
     sdv: &[DVec3],
@@ -566,33 +608,39 @@ fn particle_pass(
         v,
         inv_mass,
         incidence,
+        loose,
         ..
     } = packed;
     let (inv_mass, inc) = (&inv_mass[..], &*incidence);
-    par::each2(x, v, |i, xi, vi| {
-        if inv_mass[i] == 0.0 {
-            return;
-        }
-        let dv = inc.sum(sdv, i);
-        match update {
-            Update::VelocityFirst => {
-                *vi += dv + g * h;
-                *xi += h * *vi;
+    for range in loose.iter() {
+        let first = range.start;
+        let (x, v) = (&mut x[range.clone()], &mut v[range.clone()]);
+        par::each2(x, v, |k, xi, vi| {
+            let i = first + k;
+            if inv_mass[i] == 0.0 {
+                return;
             }
-            Update::PositionFirst => {
-                *xi += h * *vi;
-                *vi += dv + g * h;
+            let dv = inc.sum(sdv, i);
+            match update {
+                Update::VelocityFirst => {
+                    *vi += dv + g * h;
+                    *xi += h * *vi;
+                }
+                Update::PositionFirst => {
+                    *xi += h * *vi;
+                    *vi += dv + g * h;
+                }
+                Update::Exact => {
+                    *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
+                    *vi += dv + g * h;
+                }
+                Update::PaperAlgorithm1 => {
+                    *vi += h * dv + g * h;
+                    *xi += h * *vi;
+                }
             }
-            Update::Exact => {
-                *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
-                *vi += dv + g * h;
-            }
-            Update::PaperAlgorithm1 => {
-                *vi += h * dv + g * h;
-                *xi += h * *vi;
-            }
-        }
-    });
+        });
+    }
 }
 
 /// Accelerations from per-spring relative accelerations (RK4's derivative).
