@@ -607,10 +607,10 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
         }
         let base = keys.partition_point(|k| (k.0 as u64) < range.start);
         let count = (range.end - range.start) as usize;
-        let run = keys.get(base..base + count).unwrap_or(&[]);
-        let next = keys.get(base + count).map(|k| k.0 as u64);
+        let at = |k: usize| keys.get(base + k).map(|r| r.0 as u64);
+        let next = at(count);
         let broken = (0..count as u64)
-            .find(|&k| run.get(k as usize).map(|r| r.0 as u64) != Some(range.start + k))
+            .find(|&k| at(k as usize) != Some(range.start + k))
             .map(|k| range.start + k)
             .or((next == Some(range.end - 1)).then_some(range.end - 1));
         if let Some(index) = broken {

@@ -153,14 +153,19 @@ impl Builder {
         let origin = DVec3::from(c.origin);
         let vel = DVec3::from(c.velocity);
         let first = self.next;
-        // One allocation for the free particles: growing by doubling would leave the freed
-        // halves behind in the allocator (a fifth more resident memory at 1024²).
+        // One allocation each for the particles and their entity records: growing by doubling
+        // leaves up to half the capacity unused and the freed blocks behind in the allocator
+        // (a fifth more resident memory at 1024²). The first call sizes the entity records for
+        // every particle and the springs' entity; the free particles' storage has a few slots
+        // to spare, one per pin.
         let pins = (0..rows)
             .flat_map(|r| (0..cols).map(move |c| (c, r)))
             .filter(|&(c, r)| pinned(c, r))
             .count();
         self.world
-            .reserve::<(Particle, SceneIndex)>((cols * rows - pins) as u32);
+            .reserve::<(Particle, SceneIndex)>((cols * rows + 1) as u32);
+        self.world
+            .reserve::<(Particle, SceneIndex, Pin)>(pins as u32);
         for row in 0..rows {
             for col in 0..cols {
                 let x = origin + u * (col as f64 * du) + v * (row as f64 * dv);

@@ -1,0 +1,240 @@
+//! Cloth springs kept as one grid component: the grid pass (symplectic and explicit Euler,
+//! no memory per spring) against the same springs spawned one by one, and the errors a
+//! grid that no longer matches its particles gives.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+use harmonic::prelude::*;
+use harmonic::{ClothSprings, GridLink, SceneIndex, SimError};
+use hecs::{Entity, World};
+
+fn cloth(n: u32, integrator: Integrator) -> Scene {
+    let mut scene = harmonic::bench::hanging_cloth(n);
+    scene.dt = 1e-3;
+    scene.substeps = Some(4);
+    scene.integrator = Some(integrator.name().into());
+    // Damped, so the damping term of the pass is exercised too.
+    for c in &mut scene.cloths {
+        c.structural.damping = Some(0.05);
+    }
+    scene
+}
+
+/// The World with every `ClothSprings` replaced by one `Spring` entity per spring, made here
+/// from the grid's definition (an independent expansion).
+fn springs_one_by_one(mut world: World) -> World {
+    let by_index: HashMap<u32, Entity> = world
+        .query::<(Entity, &SceneIndex)>()
+        .iter()
+        .map(|(e, i)| (i.0, e))
+        .collect();
+    let grids: Vec<(Entity, ClothSprings)> = world
+        .query::<(Entity, &ClothSprings)>()
+        .iter()
+        .map(|(e, c)| (e, c.clone()))
+        .collect();
+    for (e, g) in grids {
+        world.despawn(e).unwrap();
+        for r in 0..g.rows as i64 {
+            for c in 0..g.cols as i64 {
+                for l in &g.links {
+                    let (c1, r1) = (c + l.offset.0 as i64, r + l.offset.1 as i64);
+                    if c1 < 0 || r1 < 0 || c1 >= g.cols as i64 || r1 >= g.rows as i64 {
+                        continue;
+                    }
+                    let at = |c: i64, r: i64| by_index[&(g.first + (r * g.cols as i64 + c) as u32)];
+                    world.spawn((Spring {
+                        a: at(c, r),
+                        b: at(c1, r1),
+                        rest_length: l.rest_length,
+                        stiffness: l.stiffness,
+                        damping: l.damping,
+                    },));
+                }
+            }
+        }
+    }
+    world
+}
+
+fn run(sim: &mut Simulation, frames: usize) -> Vec<DVec3> {
+    for _ in 0..frames {
+        sim.step().unwrap();
+    }
+    sim.positions()
+        .iter()
+        .chain(sim.velocities())
+        .copied()
+        .collect()
+}
+
+#[test]
+fn the_grid_pass_matches_the_springs_one_by_one() {
+    // 24×24 runs on the calling thread in one band; 72×72 in bands on rayon's pool.
+    for n in [24, 72] {
+        for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
+            let mut scene = cloth(n, integrator);
+            // Explicit Euler grows every mode at any step (and the rounding difference with
+            // it): small steps, few frames.
+            let frames = if integrator == Integrator::ExplicitEuler {
+                scene.substeps = Some(64);
+                8
+            } else {
+                60
+            };
+            let built = scene.build();
+            let mut grid = Simulation::with_props(built.world, built.config, None).unwrap();
+            assert_eq!(grid.packed().grids.len(), 1);
+            assert!(grid.packed().springs.is_empty());
+            let built = scene.build();
+            let world = springs_one_by_one(built.world);
+            let mut single = Simulation::with_props(world, built.config, None).unwrap();
+            assert!(single.packed().grids.is_empty());
+            assert_eq!(grid.packed().spring_count(), single.packed().spring_count());
+            let start = grid.positions().to_vec();
+            let (a, b) = (run(&mut grid, frames), run(&mut single, frames));
+            // Only the order of each particle's sum differs: agreement to rounding.
+            let worst = a
+                .iter()
+                .zip(&b)
+                .map(|(p, q)| (*p - *q).length())
+                .fold(0.0, f64::max);
+            let moved = start
+                .iter()
+                .zip(&a)
+                .map(|(p, q)| (*p - *q).length())
+                .fold(0.0, f64::max);
+            assert!(a.iter().all(|x| x.is_finite()));
+            assert!(
+                moved > 1e-4,
+                "{integrator} {n}: the cloth must move ({moved:e})"
+            );
+            assert!(
+                worst < 1e-10,
+                "{integrator} {n}×{n}: grid and single springs differ by {worst:e}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_grid_that_no_longer_matches_its_particles_is_a_located_error() {
+    let mut sim = Simulation::from_scene(&cloth(8, Integrator::SymplecticEuler)).unwrap();
+    sim.step().unwrap();
+    let grid = sim.packed().grids[0].entity;
+    // A particle of the cloth despawned: its scene index is missing.
+    let gone = sim.particle_entity(19).unwrap();
+    let particle = *sim.world().get::<&Particle>(gone).unwrap();
+    sim.world_mut().despawn(gone).unwrap();
+    let e = sim.step().unwrap_err();
+    assert!(
+        matches!(e, SimError::BrokenCloth { cloth, index: 19 } if cloth == grid),
+        "{e}"
+    );
+    // Back, then a second particle claiming the same scene index.
+    sim.world_mut().spawn((particle, SceneIndex(19)));
+    sim.step().unwrap();
+    let twin = sim.world_mut().spawn((particle, SceneIndex(63)));
+    let e = sim.step().unwrap_err();
+    assert!(matches!(e, SimError::BrokenCloth { index: 63, .. }), "{e}");
+    sim.world_mut().despawn(twin).unwrap();
+    sim.step().unwrap();
+    // A second grid over some of the same particles, and bad links.
+    let link = GridLink {
+        offset: (1, 0),
+        rest_length: 0.1,
+        stiffness: 1.0,
+        damping: 0.0,
+    };
+    let bad_grids = [
+        (
+            ClothSprings {
+                first: 60,
+                cols: 2,
+                rows: 2,
+                links: vec![link],
+            },
+            "overlap",
+        ),
+        (
+            ClothSprings {
+                first: 0,
+                cols: 0,
+                rows: 8,
+                links: vec![],
+            },
+            "at least 1 × 1",
+        ),
+    ];
+    for (g, what) in bad_grids {
+        let extra = sim.world_mut().spawn((g,));
+        let e = sim.step().unwrap_err();
+        assert!(e.to_string().contains(what), "{e}");
+        sim.world_mut().despawn(extra).unwrap();
+    }
+    for (l, what) in [
+        (
+            GridLink {
+                offset: (0, 0),
+                ..link
+            },
+            "offset",
+        ),
+        (
+            GridLink {
+                stiffness: f64::NAN,
+                ..link
+            },
+            "stiffness",
+        ),
+        (
+            GridLink {
+                rest_length: 0.0,
+                ..link
+            },
+            "rest length",
+        ),
+    ] {
+        let keep = {
+            let mut c = sim.world_mut().get::<&mut ClothSprings>(grid).unwrap();
+            let keep = c.links[0];
+            c.links[0] = l;
+            keep
+        };
+        let e = sim.step().unwrap_err();
+        assert!(
+            matches!(&e, SimError::BadCloth { cloth, what: w } if *cloth == grid && w.contains(what)),
+            "{e}"
+        );
+        sim.world_mut()
+            .get::<&mut ClothSprings>(grid)
+            .unwrap()
+            .links[0] = keep;
+    }
+    // Every error left the state as it was, and the repaired scene steps on.
+    let before = sim.positions().to_vec();
+    assert_eq!(before.len(), 64);
+    sim.step().unwrap();
+    assert!(sim.positions().iter().all(|x| x.is_finite()));
+    assert_ne!(sim.positions(), &before[..]);
+}
+
+#[test]
+fn other_integrators_get_the_grid_expanded() {
+    let mut sim = Simulation::from_scene(&cloth(16, Integrator::SymplecticEuler)).unwrap();
+    let springs = sim.packed().spring_count();
+    assert!(sim.packed().springs.is_empty());
+    let mut c = *sim.config();
+    c.integrator = Integrator::HarmonicGs;
+    sim.set_config(c).unwrap();
+    assert!(sim.packed().grids.is_empty());
+    assert_eq!(sim.packed().springs.len(), springs);
+    assert!(sim.packed().colouring.colours() > 0);
+    sim.step().unwrap();
+    c.integrator = Integrator::SymplecticEuler;
+    sim.set_config(c).unwrap();
+    assert_eq!(sim.packed().grids.len(), 1);
+    sim.step().unwrap();
+    assert!(sim.positions().iter().all(|x| x.is_finite()));
+}
