@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 
-use crate::buffers::Packed;
+use crate::buffers::{GatherOptions, Packed};
 use crate::integrate::{Integrator, Solver};
 use crate::scene::{Anchor, Cloth, Plane, Scene, SpringSpec};
 
@@ -43,11 +43,16 @@ pub fn hanging_cloth(n: u32) -> Scene {
 /// One row of the bench.
 pub struct Row {
     pub integrator: Integrator,
+    /// The cloth's springs expanded one by one, for an integrator that runs on the grid as
+    /// the simulation does (a comparison row).
+    pub one_by_one: bool,
     /// Median spring-substeps per second.
     pub rate: f64,
 }
 
-/// Times `substeps` substeps of each integrator, `repeats` times round-robin, and reports medians.
+/// Times `substeps` substeps of each integrator on the buffers the simulation gives it,
+/// `repeats` times round-robin, and reports medians. An integrator with a grid pass is timed
+/// on the springs one by one too.
 pub fn measure(
     n: u32,
     substeps: u32,
@@ -55,16 +60,35 @@ pub fn measure(
     integrators: &[Integrator],
 ) -> (usize, Vec<Row>) {
     let scene = hanging_cloth(n);
-    let packed = Packed::gather(&scene.build().world).expect("generated scene is consistent");
+    let world = scene.build().world;
+    let gather = |keep_grids| {
+        let options = GatherOptions {
+            keep_grids,
+            colouring: !keep_grids,
+        };
+        Packed::gather_with(&world, options).expect("generated scene is consistent")
+    };
+    let (packed, grid) = (gather(false), gather(true));
     let h = scene.dt;
     let g = DVec3::from(scene.gravity);
     let m = packed.spring_count();
-    let mut samples = vec![Vec::new(); integrators.len()];
-    let mut runs: Vec<(Packed, Solver)> = integrators
+    let cases: Vec<(Integrator, bool)> = integrators
         .iter()
-        .map(|&i| {
+        .flat_map(|&i| {
+            let one_by_one = i.runs_on_grids().then_some((i, true));
+            [(i, false)].into_iter().chain(one_by_one)
+        })
+        .collect();
+    let mut samples = vec![Vec::new(); cases.len()];
+    let mut runs: Vec<(Packed, Solver)> = cases
+        .iter()
+        .map(|&(i, one_by_one)| {
             let mut s = Solver::new(i, false, g);
-            let mut p = packed.clone();
+            let mut p = if i.runs_on_grids() && !one_by_one {
+                grid.clone()
+            } else {
+                packed.clone()
+            };
             s.prepare(&p, h).expect("bench cloth is under-damped");
             for _ in 0..10 {
                 s.substep(&mut p, h).expect("prepared");
@@ -81,13 +105,14 @@ pub fn measure(
             samples[k].push(m as f64 * substeps as f64 / t.elapsed().as_secs_f64());
         }
     }
-    let rows = integrators
+    let rows = cases
         .iter()
         .zip(samples)
-        .map(|(&integrator, mut v)| {
+        .map(|(&(integrator, one_by_one), mut v)| {
             v.sort_by(f64::total_cmp);
             Row {
                 integrator,
+                one_by_one,
                 rate: v[v.len() / 2],
             }
         })
@@ -101,7 +126,7 @@ pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -
     let threads = rayon::current_num_threads();
     let reference = rows
         .iter()
-        .find(|r| r.integrator == Integrator::SymplecticEuler)
+        .find(|r| r.integrator == Integrator::SymplecticEuler && !r.one_by_one)
         .map(|r| r.rate);
     let mut out = String::new();
     let _ = writeln!(
@@ -118,8 +143,13 @@ pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -
         let ratio = reference.map_or("-".to_string(), |s| format!("{:.2}×", r.rate / s));
         let _ = writeln!(
             out,
-            "| {} | {:.1} | {:.2} | {ratio} |",
+            "| {}{} | {:.1} | {:.2} | {ratio} |",
             r.integrator,
+            if r.one_by_one {
+                " (springs one by one)"
+            } else {
+                ""
+            },
             r.rate / 1e6,
             1e9 / r.rate
         );

@@ -619,12 +619,26 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
                 index: index as u32,
             });
         }
+        // Every link pointing forward in row-major order (the same springs): the grid pass
+        // evaluates a spring at its earlier end.
+        let links = c
+            .links
+            .iter()
+            .map(|l| {
+                let (dc, dr) = l.offset;
+                let forward = dr > 0 || (dr == 0 && dc > 0);
+                GridLink {
+                    offset: if forward { (dc, dr) } else { (-dc, -dr) },
+                    ..*l
+                }
+            })
+            .collect();
         grids.push(PackedGrid {
             entity: e,
             base: base as u32,
             cols: c.cols,
             rows: c.rows,
-            links: c.links,
+            links,
         });
     }
     Ok(grids)

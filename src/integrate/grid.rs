@@ -1,11 +1,13 @@
 //! Symplectic and explicit Euler over cloth grids ([`PackedGrid`]) with no memory per spring.
 //!
-//! Each particle sums its own springs, reading only the state at the start of the substep, so
-//! a spring is evaluated once from each end (the two results are exact negatives: the same
-//! differences, negated). The new state goes back in place a few rows behind the row being
-//! computed, once no later row reads the old one; the rows a band's neighbours read are copied
-//! before the pass. Scratch is a few rows per band instead of a buffer per spring or particle,
-//! and every particle's result is independent of the banding (so of the thread count).
+//! Every link points forward in row-major order (gather makes it so), so a sweep over the
+//! rows evaluates each spring once, at its earlier end, and adds its change to both ends in a
+//! ring of the next `reach + 1` rows. A row is complete once the sweep has passed it; it then
+//! moves, and is written back at once: no later spring reads it. Bands of rows run in
+//! parallel, each also evaluating the springs that reach into it from the `reach` rows above
+//! (their old state copied before the pass, as are the rows below it). Scratch is a few rows
+//! per band instead of a buffer per spring or per particle, and each particle sums the same
+//! terms in the same order whatever the banding (so whatever the thread count).
 
 use std::ops::Range;
 
@@ -27,8 +29,20 @@ struct Band {
     above: Vec<State>,
     /// Old state of the `reach` rows below it (rows past the last unused).
     below: Vec<State>,
-    /// New state of the last `reach + 1` rows computed, not yet written back.
-    pending: Vec<State>,
+    /// Summed velocity changes of the `reach + 1` rows the sweep is adding to.
+    ring: Vec<DVec3>,
+    /// Per link, for the row being swept: see [`Row::meta`].
+    meta: Vec<(usize, bool, bool, usize)>,
+}
+
+/// The anchor row being swept.
+struct Row<'a> {
+    a: usize,
+    /// Its ring slot, when it is one of the band's own rows.
+    own: Option<usize>,
+    /// Per link: the other end's row, whether that exists, whether it is in the band, and
+    /// its ring slot.
+    meta: &'a [(usize, bool, bool, usize)],
 }
 
 /// Per grid: the links' coefficients for the prepared step, and the bands.
@@ -61,7 +75,8 @@ impl GridPass {
                     rows: r0..(r0 + per).min(rows),
                     above: vec![(DVec3::ZERO, DVec3::ZERO); reach * cols],
                     below: vec![(DVec3::ZERO, DVec3::ZERO); reach * cols],
-                    pending: vec![(DVec3::ZERO, DVec3::ZERO); (reach + 1) * cols],
+                    ring: vec![DVec3::ZERO; (reach + 1) * cols],
+                    meta: vec![(0, false, false, 0); g.links.len()],
                 })
                 .collect();
             self.grids.push((lin, bands));
@@ -88,11 +103,7 @@ impl GridPass {
         } = packed;
         for (grid, (lin, bands)) in grids.iter().zip(&mut self.grids) {
             let range = grid.range();
-            let (x, v, inv) = (
-                &mut x[range.clone()],
-                &mut v[range.clone()],
-                &inv_mass[range],
-            );
+            let (x, v) = (&mut x[range.clone()], &mut v[range.clone()]);
             let cols = grid.cols as usize;
             let reach = grid.reach();
             // The rows each band's neighbours will overwrite, copied first.
@@ -118,6 +129,7 @@ impl GridPass {
             let per = bands[0].rows.len() * cols;
             let ctx = Ctx {
                 grid,
+                inv: &inv_mass[range],
                 lin,
                 incidence,
                 sdv,
@@ -128,13 +140,12 @@ impl GridPass {
                 reach,
             };
             if bands.len() == 1 {
-                ctx.band(&mut bands[0], x, v, inv);
+                ctx.band(&mut bands[0], x, v);
             } else {
                 x.par_chunks_mut(per)
                     .zip(v.par_chunks_mut(per))
-                    .zip(inv.par_chunks(per))
                     .zip(bands.par_iter_mut())
-                    .for_each(|(((x, v), inv), b)| ctx.band(b, x, v, inv));
+                    .for_each(|((x, v), b)| ctx.band(b, x, v));
             }
         }
     }
@@ -143,6 +154,8 @@ impl GridPass {
 /// What every band of one grid shares.
 struct Ctx<'a> {
     grid: &'a PackedGrid,
+    /// The grid's inverse masses.
+    inv: &'a [f64],
     lin: &'a [Linear],
     incidence: &'a Incidence,
     sdv: &'a [DVec3],
@@ -154,84 +167,106 @@ struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    /// The band's rows in order, each written back `reach + 1` rows later.
-    fn band(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3], inv: &[f64]) {
-        let (cols, reach) = (self.cols, self.reach);
+    /// The band's rows in order: the springs anchored in each, then the row's move.
+    fn band(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
+        let (cols, reach, rows) = (self.cols, self.reach, self.grid.rows as usize);
         let Band {
-            rows,
+            rows: band,
             above,
             below,
-            pending,
+            ring,
+            meta,
         } = b;
-        let (r0, r1) = (rows.start, rows.end);
+        let (r0, r1) = (band.start, band.end);
         let slot = |r: usize| (r % (reach + 1)) * cols;
-        let write_back = |r: usize, x: &mut [DVec3], v: &mut [DVec3], pending: &[State]| {
-            let (at, from) = ((r - r0) * cols, slot(r));
-            for c in 0..cols {
-                (x[at + c], v[at + c]) = pending[from + c];
+        ring.fill(DVec3::ZERO);
+        let first = r0.saturating_sub(reach);
+        for a in first..r1 {
+            // The slot of row a − 1, complete and moved, now collects row a + reach.
+            if a > first {
+                let s = slot(a + reach);
+                ring[s..s + cols].fill(DVec3::ZERO);
             }
-        };
-        for r in r0..r1 {
-            if r > r0 + reach {
-                write_back(r - reach - 1, x, v, pending);
+            // Per link: the other end's row, whether it exists and is in the band, its slot.
+            for (m, l) in meta.iter_mut().zip(&self.grid.links) {
+                let rb = a + l.offset.1 as usize;
+                *m = (rb, rb < rows, (r0..r1).contains(&rb), slot(rb));
             }
-            let out = slot(r);
-            for c in 0..cols {
-                let k = (r - r0) * cols + c;
-                pending[out + c] = self.particle(c, r, (x[k], v[k]), inv[k], |cc, rr| {
-                    if rr < r0 {
-                        above[(rr + reach - r0) * cols + cc]
-                    } else if rr >= r1 {
-                        below[(rr - r1) * cols + cc]
+            let row = Row {
+                a,
+                own: (a >= r0).then(|| slot(a)),
+                meta,
+            };
+            if a >= r0 && a + reach < r1 {
+                // Every row read is in the band (the common case: no halo lookups).
+                self.anchor_row(&row, ring, |c, r| {
+                    let j = (r - r0) * cols + c;
+                    (x[j], v[j])
+                });
+            } else {
+                self.anchor_row(&row, ring, |c, r| {
+                    if r < r0 {
+                        above[(r + reach - r0) * cols + c]
+                    } else if r >= r1 {
+                        below[(r - r1) * cols + c]
                     } else {
-                        let j = (rr - r0) * cols + cc;
+                        let j = (r - r0) * cols + c;
                         (x[j], v[j])
                     }
                 });
             }
-        }
-        for r in r0.max(r1.saturating_sub(reach + 1))..r1 {
-            write_back(r, x, v, pending);
+            if a >= r0 {
+                let s = slot(a);
+                for c in 0..cols {
+                    let k = (a - r0) * cols + c;
+                    let i = a * cols + c;
+                    if self.inv[i] != 0.0 {
+                        let dv =
+                            ring[s + c] + self.incidence.sum(self.sdv, self.grid.base as usize + i);
+                        (x[k], v[k]) = self.advance((x[k], v[k]), dv);
+                    }
+                }
+            }
         }
     }
 
-    /// The new state of grid particle `(c, r)` from its old one and its neighbours' (`old`).
+    /// The springs anchored in one row: each evaluated once, its change added to both ends.
     #[inline(always)]
-    fn particle(
-        &self,
-        c: usize,
-        r: usize,
-        (xi, vi): State,
-        inv: f64,
-        old: impl Fn(usize, usize) -> State,
-    ) -> State {
-        if inv == 0.0 {
-            return (xi, vi);
-        }
-        let (cols, rows) = (self.cols as isize, self.grid.rows as isize);
-        let i = self.grid.base as usize + r * self.cols + c;
-        let mut dv = self.incidence.sum(self.sdv, i);
-        for (link, l) in self.grid.links.iter().zip(self.lin) {
-            let (dc, dr) = (link.offset.0 as isize, link.offset.1 as isize);
-            for (cc, rr) in [
-                (c as isize + dc, r as isize + dr),
-                (c as isize - dc, r as isize - dr),
-            ] {
-                if cc < 0 || rr < 0 || cc >= cols || rr >= rows {
+    fn anchor_row(&self, row: &Row<'_>, ring: &mut [DVec3], old: impl Fn(usize, usize) -> State) {
+        let (cols, a) = (self.cols, row.a);
+        for c in 0..cols {
+            let (xa, va) = old(c, a);
+            let inv_a = self.inv[a * cols + c];
+            for ((link, l), &(rb, exists, in_band, sb)) in
+                self.grid.links.iter().zip(self.lin).zip(row.meta.iter())
+            {
+                let cb = c as isize + link.offset.0 as isize;
+                if !exists || cb < 0 || cb as usize >= cols {
                     continue;
                 }
-                let (xj, vj) = old(cc as usize, rr as usize);
-                let (n, delta, delta_dot) = axial(xi, xj, vi, vj, link.rest_length);
-                // This end's share of the force-form change: −φ n / m.
-                dv -= inv * (l.p * delta + l.q * delta_dot) * n;
+                let cb = cb as usize;
+                let (xb, vb) = old(cb, rb);
+                let (n, delta, delta_dot) = axial(xa, xb, va, vb, link.rest_length);
+                // Force form (μ = 1): each end's change is −φ n / m at a, +φ n / m at b.
+                let f = (l.p * delta + l.q * delta_dot) * n;
+                if let Some(sa) = row.own {
+                    ring[sa + c] -= inv_a * f;
+                }
+                if in_band {
+                    ring[sb + cb] += self.inv[rb * cols + cb] * f;
+                }
             }
         }
+    }
+
+    #[inline(always)]
+    fn advance(&self, (x, v): State, dv: DVec3) -> State {
         let (g, h) = (self.g, self.h);
         match self.update {
-            Update::PositionFirst => (xi + h * vi, vi + dv + g * h),
+            Update::PositionFirst => (x + h * v, v + dv + g * h),
             _ => {
-                let v = vi + dv + g * h;
-                (xi + h * v, v)
+                let v = v + dv + g * h;
+                (x + h * v, v)
             }
         }
     }
