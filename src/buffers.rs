@@ -173,13 +173,15 @@ impl PackedGrid {
         self.base as usize..self.base as usize + self.cols as usize * self.rows as usize
     }
 
-    /// Rows a link reaches across (the largest `|dr|`).
+    /// Rows a link reaches across (the largest `|dr|`; a link longer than the grid joins
+    /// nothing).
     pub fn reach(&self) -> usize {
         self.links
             .iter()
             .map(|l| l.offset.1.unsigned_abs() as usize)
             .max()
             .unwrap_or(0)
+            .min(self.rows.saturating_sub(1) as usize)
     }
 
     /// The springs of grid row `row`, each once, in the order expansion packs them: cell by
@@ -599,8 +601,11 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
         }
         end = range.end;
         for (k, l) in c.links.iter().enumerate() {
-            if l.offset == (0, 0) {
-                return Err(bad(format!("links[{k}]: offset must not be (0, 0)")));
+            if l.offset == (0, 0) || l.offset.0 == i32::MIN || l.offset.1 == i32::MIN {
+                return Err(bad(format!(
+                    "links[{k}]: offset must not be (0, 0) and within ±(2³¹ − 1), got {:?}",
+                    l.offset
+                )));
             }
             check_spring(l.rest_length, l.stiffness, l.damping)
                 .map_err(|w| bad(format!("links[{k}]: {w}")))?;

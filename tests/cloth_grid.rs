@@ -238,3 +238,19 @@ fn other_integrators_get_the_grid_expanded() {
     sim.step().unwrap();
     assert!(sim.positions().iter().all(|x| x.is_finite()));
 }
+
+#[test]
+fn a_link_offset_that_cannot_be_reversed_is_refused() {
+    let mut sim = Simulation::from_scene(&cloth(4, Integrator::SymplecticEuler)).unwrap();
+    let grid = sim.packed().grids[0].entity;
+    sim.world_mut()
+        .get::<&mut ClothSprings>(grid)
+        .unwrap()
+        .links[0]
+        .offset = (i32::MIN, 1);
+    let e = sim.step().unwrap_err();
+    assert!(
+        matches!(&e, SimError::BadCloth { what, .. } if what.contains("offset")),
+        "{e}"
+    );
+}

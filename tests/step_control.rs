@@ -83,3 +83,36 @@ fn every_hard_case_stays_bounded_with_default_settings() {
         );
     }
 }
+
+#[test]
+fn a_large_grid_seen_through_its_window_gives_the_whole_cloths_frequency() {
+    // 160×160: the estimate on the grid kept whole sees a 64×64 window; the same springs one
+    // by one give the whole network to the power iteration.
+    let scene = harmonic::bench::hanging_cloth(160);
+    let world = scene.build().world;
+    let whole = Packed::gather(&world).unwrap();
+    let grid = Packed::gather_with(
+        &world,
+        harmonic::buffers::GatherOptions {
+            keep_grids: true,
+            colouring: false,
+        },
+    )
+    .unwrap();
+    assert!(whole.grids.is_empty() && grid.grids.len() == 1);
+    let (w, g) = (
+        step_control::network_frequency(&whole, 300),
+        step_control::network_frequency(&grid, 300),
+    );
+    println!("ω_max: whole cloth {w}, window {g}");
+    assert!((g / w - 1.0).abs() < 0.02, "window {g} vs whole {w}");
+    // And the controller makes the same choice from either.
+    let (a, b) = (
+        step_control::choose(&whole, Integrator::SymplecticEuler, 1.0 / 60.0),
+        step_control::choose(&grid, Integrator::SymplecticEuler, 1.0 / 60.0),
+    );
+    assert!(
+        a.substeps.abs_diff(b.substeps) <= a.substeps / 50 + 1,
+        "{a:?} vs {b:?}"
+    );
+}
