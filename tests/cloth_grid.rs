@@ -2,9 +2,10 @@
 //! no memory per spring) against the same springs spawned one by one, and the errors a
 //! grid that no longer matches its particles gives.
 
+mod common;
+
 use std::collections::HashMap;
 
-use glam::DVec3;
 use harmonic::prelude::*;
 use harmonic::{ClothSprings, GridLink, SceneIndex, SimError};
 use hecs::{Entity, World};
@@ -58,17 +59,6 @@ fn springs_one_by_one(mut world: World) -> World {
     world
 }
 
-fn run(sim: &mut Simulation, frames: usize) -> Vec<DVec3> {
-    for _ in 0..frames {
-        sim.step().unwrap();
-    }
-    sim.positions()
-        .iter()
-        .chain(sim.velocities())
-        .copied()
-        .collect()
-}
-
 #[test]
 fn the_grid_pass_matches_the_springs_one_by_one() {
     // 24×24 runs on the calling thread in one band; 72×72 in bands on rayon's pool.
@@ -93,7 +83,10 @@ fn the_grid_pass_matches_the_springs_one_by_one() {
             assert!(single.packed().grids.is_empty());
             assert_eq!(grid.packed().spring_count(), single.packed().spring_count());
             let start = grid.positions().to_vec();
-            let (a, b) = (run(&mut grid, frames), run(&mut single, frames));
+            let (a, b) = (
+                common::run_state(&mut grid, frames),
+                common::run_state(&mut single, frames),
+            );
             // Only the order of each particle's sum differs: agreement to rounding.
             let worst = a
                 .iter()

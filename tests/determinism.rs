@@ -1,6 +1,8 @@
 //! The same scene gives bit-identical states on one thread and on two: the parallel passes
 //! split work into fixed chunks and add partial sums in chunk order.
 
+mod common;
+
 use harmonic::prelude::*;
 
 fn run(path: &str, integrator: Option<&str>, threads: usize, frames: usize) -> Vec<DVec3> {
@@ -14,14 +16,7 @@ fn run(path: &str, integrator: Option<&str>, threads: usize, frames: usize) -> V
             scene.integrator = Some(name.to_string());
         }
         let mut sim = Simulation::from_scene(&scene).unwrap();
-        for _ in 0..frames {
-            sim.step().unwrap();
-        }
-        sim.positions()
-            .iter()
-            .chain(sim.velocities())
-            .copied()
-            .collect()
+        common::run_state(&mut sim, frames)
     })
 }
 

@@ -124,3 +124,15 @@ pub fn seed() -> u64 {
     eprintln!("seed: {seed} (replay with HARMONIC_SEED={seed})");
     seed
 }
+
+/// `frames` steps, then the state: positions followed by velocities.
+pub fn run_state(sim: &mut Simulation, frames: usize) -> Vec<DVec3> {
+    for _ in 0..frames {
+        sim.step().unwrap();
+    }
+    sim.positions()
+        .iter()
+        .chain(sim.velocities())
+        .copied()
+        .collect()
+}
