@@ -222,10 +222,7 @@ impl PackedGrid {
     pub fn spring_count(&self) -> usize {
         self.links
             .iter()
-            .map(|l| {
-                let (dc, dr) = (l.offset.0.unsigned_abs(), l.offset.1.unsigned_abs());
-                self.cols.saturating_sub(dc) as usize * self.rows.saturating_sub(dr) as usize
-            })
+            .map(|l| l.count(self.cols, self.rows) as usize)
             .sum()
     }
 }
@@ -234,15 +231,7 @@ impl PackedSpring {
     /// A spring between packed particles `a` and `b`, split by their masses (`1/inv_mass`,
     /// infinite where pinned).
     pub fn new(a: u32, b: u32, rest: f64, stiffness: f64, damping: f64, inv_mass: &[f64]) -> Self {
-        let mass = |i: u32| {
-            let w = inv_mass[i as usize];
-            if w == 0.0 {
-                f64::INFINITY
-            } else {
-                1.0 / w
-            }
-        };
-        let (ma, mb) = (mass(a), mass(b));
+        let (ma, mb) = (mass_of(inv_mass[a as usize]), mass_of(inv_mass[b as usize]));
         let mu = reduced_mass(ma, mb);
         let (wa, wb) = if mu.is_finite() {
             (mu / ma, mu / mb)
@@ -263,7 +252,7 @@ impl PackedSpring {
 }
 
 /// What [`Packed::gather_with`] builds beyond the state.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GatherOptions {
     /// Keep cloth springs as [`PackedGrid`]s (no memory per spring; only the integrators with
     /// a grid pass take them) instead of expanding them into [`Packed::springs`].
@@ -297,6 +286,8 @@ pub struct Packed {
     /// Incidence of `springs` (empty without springs).
     pub incidence: Incidence,
     pub colouring: Colouring,
+    /// What was built beyond the state.
+    pub options: GatherOptions,
     /// Entity id → packed index (`u32::MAX` where none), built on first use.
     index_by_id: std::sync::OnceLock<Vec<u32>>,
 }
@@ -309,12 +300,7 @@ impl Packed {
     /// Particle `i`'s mass (kg), infinite when pinned.
     #[inline]
     pub fn mass(&self, i: usize) -> f64 {
-        let w = self.inv_mass[i];
-        if w == 0.0 {
-            f64::INFINITY
-        } else {
-            1.0 / w
-        }
+        mass_of(self.inv_mass[i])
     }
 
     /// Springs in all, kept grids included.
@@ -415,6 +401,7 @@ impl Packed {
             x: Vec::with_capacity(n),
             v: Vec::with_capacity(n),
             inv_mass: Vec::with_capacity(n),
+            options,
             ..Default::default()
         };
         for &e in &entities {
@@ -553,6 +540,16 @@ impl Packed {
     /// Stretch `δ = |x_b − x_a| − l0` of spring `s`.
     pub fn stretch(&self, s: &PackedSpring) -> f64 {
         (self.x[s.b as usize] - self.x[s.a as usize]).length() - s.rest
+    }
+}
+
+/// The mass of an inverse mass: infinite for 0 (pinned).
+#[inline]
+fn mass_of(inv_mass: f64) -> f64 {
+    if inv_mass == 0.0 {
+        f64::INFINITY
+    } else {
+        1.0 / inv_mass
     }
 }
 

@@ -81,17 +81,19 @@ impl ClothSprings {
         first..first + self.cols as u64 * self.rows as u64
     }
 
-    /// The springs of link `l`: `(cols − |dc|)·(rows − |dr|)` when that is positive.
-    pub fn link_count(&self, l: &GridLink) -> u64 {
-        let (dc, dr) = (
-            l.offset.0.unsigned_abs() as u64,
-            l.offset.1.unsigned_abs() as u64,
-        );
-        (self.cols as u64).saturating_sub(dc) * (self.rows as u64).saturating_sub(dr)
-    }
-
     /// Springs in all.
     pub fn spring_count(&self) -> u64 {
-        self.links.iter().map(|l| self.link_count(l)).sum()
+        self.links
+            .iter()
+            .map(|l| l.count(self.cols, self.rows))
+            .sum()
+    }
+}
+
+impl GridLink {
+    /// Its springs in a `cols × rows` grid: `(cols − |dc|)·(rows − |dr|)` when positive.
+    pub fn count(&self, cols: u32, rows: u32) -> u64 {
+        let (dc, dr) = (self.offset.0.unsigned_abs(), self.offset.1.unsigned_abs());
+        cols.saturating_sub(dc) as u64 * rows.saturating_sub(dr) as u64
     }
 }

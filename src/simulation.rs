@@ -191,6 +191,24 @@ impl Default for Frame {
     }
 }
 
+/// The caller's triangles, or the cloths' (made on first use).
+fn frame_triangles<'a>(
+    custom: &'a Option<Vec<[u32; 3]>>,
+    made: &'a std::sync::OnceLock<Vec<[u32; 3]>>,
+    cloths: &[(ClothId, ClothGrid)],
+) -> &'a [[u32; 3]] {
+    if let Some(t) = custom {
+        return t;
+    }
+    made.get_or_init(|| {
+        let mut out = Vec::new();
+        for (_, grid) in cloths {
+            grid.triangles(&mut out);
+        }
+        out
+    })
+}
+
 /// What a renderer uploads each frame: positions and normals (f32, one per particle in scene
 /// order) and the triangles indexing them. Borrowed from buffers the simulation keeps, so a
 /// frame allocates nothing.
@@ -482,12 +500,8 @@ impl Simulation {
     /// in none), and the triangles: ready for a vertex buffer, without allocation after the
     /// first frame.
     pub fn render(&mut self, alpha: f64) -> RenderView<'_> {
-        self.triangles();
         let f = &mut self.frame;
-        let triangles: &[[u32; 3]] = match &f.custom {
-            Some(t) => t,
-            None => f.triangles.get().map_or(&[], |t| t),
-        };
+        let triangles = frame_triangles(&f.custom, &f.triangles, &self.cloths);
         let x = &self.packed.x;
         let prev = if f.prev.len() == x.len() { &f.prev } else { x };
         f.positions.clear();
@@ -520,16 +534,7 @@ impl Simulation {
     /// The triangles drawn by [`Self::render`]: the cloths' from a scene, or your own mesh
     /// over the particles (scene-order indices).
     pub fn triangles(&self) -> &[[u32; 3]] {
-        if let Some(t) = &self.frame.custom {
-            return t;
-        }
-        self.frame.triangles.get_or_init(|| {
-            let mut out = Vec::new();
-            for (_, grid) in &self.cloths {
-                grid.triangles(&mut out);
-            }
-            out
-        })
+        frame_triangles(&self.frame.custom, &self.frame.triangles, &self.cloths)
     }
 
     pub fn set_triangles(&mut self, triangles: Vec<[u32; 3]>) {
@@ -862,7 +867,7 @@ impl Simulation {
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
         self.cloths
             .iter()
-            .map(|(id, g)| (*id, g.first as usize..g.range().end as usize))
+            .map(|(id, g)| (*id, g.range().start as usize..g.range().end as usize))
     }
 
     /// Adds a cloth, validated as a scene's would be, after every particle of the scene
@@ -1050,14 +1055,7 @@ impl Simulation {
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
         }
-        let options = self.gather_options();
-        let packed_as = GatherOptions {
-            keep_grids: !self.packed.grids.is_empty(),
-            colouring: self.packed.colouring.colours() > 0,
-        };
-        if options.keep_grids != packed_as.keep_grids
-            || (options.colouring && !packed_as.colouring && !self.packed.springs.is_empty())
-        {
+        if self.gather_options() != self.packed.options {
             // The new integrator or back end takes the cloths in another form.
             self.dirty = true;
             return self.gather();

@@ -15,7 +15,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::harmonic::{self, Linear};
-use super::{axial, par, Update};
+use super::{axial, euler_move, par, Update};
 use crate::buffers::{Incidence, Packed, PackedGrid};
 
 /// Old `(x, v)` of a particle.
@@ -83,8 +83,8 @@ impl GridPass {
         }
     }
 
-    /// One substep of every grid's particles: `Δv` from its springs plus `extra` (the
-    /// incidence sum of the other springs' `sdv`), then `update`.
+    /// One substep of every grid's particles: `Δv` from its springs plus the incidence sum of
+    /// the other springs' `sdv`, then `update`.
     pub(crate) fn run(
         &mut self,
         packed: &mut Packed,
@@ -223,7 +223,7 @@ impl Ctx<'_> {
                     if self.inv[i] != 0.0 {
                         let dv =
                             ring[s + c] + self.incidence.sum(self.sdv, self.grid.base as usize + i);
-                        (x[k], v[k]) = self.advance((x[k], v[k]), dv);
+                        (x[k], v[k]) = euler_move(self.update, x[k], v[k], dv, self.g, self.h);
                     }
                 }
             }
@@ -248,25 +248,13 @@ impl Ctx<'_> {
                 let (xb, vb) = old(cb, rb);
                 let (n, delta, delta_dot) = axial(xa, xb, va, vb, link.rest_length);
                 // Force form (μ = 1): each end's change is −φ n / m at a, +φ n / m at b.
-                let f = (l.p * delta + l.q * delta_dot) * n;
+                let f = l.phi(delta, delta_dot) * n;
                 if let Some(sa) = row.own {
                     ring[sa + c] -= inv_a * f;
                 }
                 if in_band {
                     ring[sb + cb] += self.inv[rb * cols + cb] * f;
                 }
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn advance(&self, (x, v): State, dv: DVec3) -> State {
-        let (g, h) = (self.g, self.h);
-        match self.update {
-            Update::PositionFirst => (x + h * v, v + dv + g * h),
-            _ => {
-                let v = v + dv + g * h;
-                (x + h * v, v)
             }
         }
     }

@@ -20,6 +20,14 @@ pub struct Linear {
     pub s: f64,
 }
 
+impl Linear {
+    /// `φ = p δ + q δ̇`: the change of relative velocity along the axis.
+    #[inline(always)]
+    pub fn phi(&self, delta: f64, delta_dot: f64) -> f64 {
+        self.p * delta + self.q * delta_dot
+    }
+}
+
 /// Below this `|β²| h²` the Taylor series replaces cos/sin and cosh/sinh, continuous across ζ = 1.
 pub const SERIES_LIMIT: f64 = 0.25;
 /// Terms of the series in `z = β² h²`; at `|z| < 0.25` the 9th term is below 1e-18.

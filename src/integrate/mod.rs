@@ -510,7 +510,7 @@ pub(crate) fn spring_response(
     l: &Linear,
 ) -> (DVec3, f64) {
     let (n, delta, delta_dot) = stretch(s, x, va, vb);
-    (n, l.p * delta + l.q * delta_dot)
+    (n, l.phi(delta, delta_dot))
 }
 
 /// The quarantine's guard on one spring's velocity change `dv = φ n` (`guard` in
@@ -574,7 +574,7 @@ fn spring_pass(
         (Some(sdx), Law::Linear(lin)) => par::each2(sdv, sdx, |k, dv, dx| {
             let (s, l) = (&springs[k], &lin[k]);
             let (n, delta, delta_dot) = stretch(s, x, v[s.a as usize], v[s.b as usize]);
-            *dv = (l.p * delta + l.q * delta_dot) * n;
+            *dv = l.phi(delta, delta_dot) * n;
             *dx = (l.r * delta + l.s * delta_dot) * n;
         }),
         // Passes that chain within a substep (RK4's stages, the forced step after its
@@ -591,6 +591,25 @@ fn spring_pass(
             let (n, phi) = spring_update(springs, x, v, law, k);
             *out = phi * n;
         }),
+    }
+}
+
+/// Symplectic (velocity first) or explicit (position first) Euler: one particle's move with
+/// its springs' velocity change `dv`.
+#[inline(always)]
+pub(crate) fn euler_move(
+    update: Update,
+    x: DVec3,
+    v: DVec3,
+    dv: DVec3,
+    g: DVec3,
+    h: f64,
+) -> (DVec3, DVec3) {
+    if update == Update::PositionFirst {
+        (x + h * v, v + (dv + g * h))
+    } else {
+        let v = v + (dv + g * h);
+        (x + h * v, v)
     }
 }
 
@@ -622,13 +641,8 @@ fn particle_pass(
             }
             let dv = inc.sum(sdv, i);
             match update {
-                Update::VelocityFirst => {
-                    *vi += dv + g * h;
-                    *xi += h * *vi;
-                }
-                Update::PositionFirst => {
-                    *xi += h * *vi;
-                    *vi += dv + g * h;
+                Update::VelocityFirst | Update::PositionFirst => {
+                    (*xi, *vi) = euler_move(update, *xi, *vi, dv, g, h);
                 }
                 Update::Exact => {
                     *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
