@@ -93,7 +93,19 @@ pub fn run_cloth(
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
     world.integration_parameters.num_solver_iterations = substeps;
+    let pinned = builder.pinned.clone();
     let handle = world.insert_soft_body(builder.no_surface_collider());
+    let v = Vector::new(
+        cloth.velocity[0] as f32,
+        cloth.velocity[1] as f32,
+        cloth.velocity[2] as f32,
+    );
+    let body = &mut world.soft_bodies[handle];
+    for i in 0..body.num_particles() {
+        if !pinned.contains(&(i as u32)) {
+            body.set_particle_velocity(i, v);
+        }
+    }
     Ok(timed_run(&mut world, handle, seconds, cloth, index))
 }
 
