@@ -93,19 +93,7 @@ pub fn run_cloth(
     let mut world = PhysicsWorld::new();
     world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
     world.integration_parameters.num_solver_iterations = substeps;
-    let pinned = builder.pinned.clone();
-    let handle = world.insert_soft_body(builder.no_surface_collider());
-    let v = Vector::new(
-        cloth.velocity[0] as f32,
-        cloth.velocity[1] as f32,
-        cloth.velocity[2] as f32,
-    );
-    let body = &mut world.soft_bodies[handle];
-    for i in 0..body.num_particles() {
-        if !pinned.contains(&(i as u32)) {
-            body.set_particle_velocity(i, v);
-        }
-    }
+    let handle = insert(&mut world, builder.no_surface_collider(), cloth);
     Ok(timed_run(&mut world, handle, seconds, cloth, index))
 }
 
@@ -128,8 +116,26 @@ pub fn drape_on_ball(
         RigidBodyBuilder::fixed().translation(centre.as_vec3()),
         ColliderBuilder::ball(radius as f32).friction(friction as f32),
     );
-    let handle = world.insert_soft_body(builder.particle_radius(thickness as f32));
+    let handle = insert(&mut world, builder.particle_radius(thickness as f32), cloth);
     Ok(timed_run(&mut world, handle, seconds, cloth, index))
+}
+
+/// Inserts the soft body with the cloth's initial velocity on its unpinned particles.
+fn insert(world: &mut PhysicsWorld, builder: SoftBodyBuilder, cloth: &Cloth) -> SoftBodyHandle {
+    let pinned = builder.pinned.clone();
+    let handle = world.insert_soft_body(builder);
+    let v = Vector::new(
+        cloth.velocity[0] as f32,
+        cloth.velocity[1] as f32,
+        cloth.velocity[2] as f32,
+    );
+    let body = &mut world.soft_bodies[handle];
+    for i in 0..body.num_particles() {
+        if !pinned.contains(&(i as u32)) {
+            body.set_particle_velocity(i, v);
+        }
+    }
+    handle
 }
 
 /// Steps `world` through `seconds` at its own step: the soft body's positions (our order) and

@@ -15,7 +15,7 @@ use super::par;
 use crate::buffers::Packed;
 
 /// Relative residual at which CG stops. On the 128×128 bench cloth at 30 steps/s, 1e-5 moves
-/// the state at t = 1 s by under 1e-10 m from a solve to 1e-10, at 60 % of its cost.
+/// the state at t = 1 s by under 1e-10 m from a solve to 1e-10, at about 60 % of its cost.
 pub const CG_TOLERANCE: f64 = 1e-5;
 /// CG iteration cap per step, against a hang only: a stiff cloth at large steps needs hundreds
 /// of iterations under the diagonal preconditioner (a cap of 200 left 20–80 % of the residual
