@@ -524,8 +524,10 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
     out
 }
 
-/// Log-log chart of wall time per simulated second against RMS error, one series per integrator.
-pub fn chart(rows: &[Row], scene: &str, svg: &Path, png: &Path) -> Result<(), String> {
+/// Log-log chart of wall time per simulated second against RMS error, one series per integrator,
+/// with the 1 cm rule and what never moving scores drawn as vertical lines.
+pub fn chart(rows: &[Row], reference: &Reference, svg: &Path, png: &Path) -> Result<(), String> {
+    let scene = reference.scene;
     use plotters::prelude::*;
     // PNG text needs a font; the embedded one avoids depending on system fonts.
     let _ =
@@ -544,11 +546,17 @@ pub fn chart(rows: &[Row], scene: &str, svg: &Path, png: &Path) -> Result<(), St
         y0 = y0.min(r.wall);
         y1 = y1.max(r.wall);
     }
+    let marks = [(RULE_ERROR, "1 cm rule"), (reference.still, "never moving")];
+    for (x, _) in marks {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+    }
     let (x0, x1, y0, y1) = (x0 / 2.0, x1 * 2.0, y0 / 2.0, y1 * 2.0);
     fn draw<DB: DrawingBackend>(
         root: DrawingArea<DB, plotters::coord::Shift>,
         scene: &str,
         pts: &[&Row],
+        marks: &[(f64, &str)],
         range: (f64, f64, f64, f64),
     ) -> Result<(), String>
     where
@@ -574,6 +582,22 @@ pub fn chart(rows: &[Row], scene: &str, svg: &Path, png: &Path) -> Result<(), St
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
             .map_err(|e| e.to_string())?;
+        for &(x, label) in marks {
+            let grey = RGBColor(110, 110, 110);
+            chart
+                .draw_series(LineSeries::new(
+                    vec![(x, y0), (x, y1)],
+                    grey.stroke_width(1),
+                ))
+                .map_err(|e| e.to_string())?;
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    label.to_string(),
+                    (x * 1.08, y0 * 1.15),
+                    ("sans-serif", 13).into_font().color(&grey),
+                )))
+                .map_err(|e| e.to_string())?;
+        }
         let mut names: Vec<&str> = pts.iter().map(|r| r.integrator.as_str()).collect();
         names.dedup();
         for (k, name) in names.iter().enumerate() {
@@ -608,12 +632,14 @@ pub fn chart(rows: &[Row], scene: &str, svg: &Path, png: &Path) -> Result<(), St
         SVGBackend::new(svg, (900, 600)).into_drawing_area(),
         scene,
         &pts,
+        &marks,
         range,
     )?;
     draw(
         BitMapBackend::new(png, (900, 600)).into_drawing_area(),
         scene,
         &pts,
+        &marks,
         range,
     )?;
     Ok(())

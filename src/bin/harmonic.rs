@@ -406,7 +406,7 @@ fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), 
         let scene = r.scene;
         harmonic::accuracy::chart(
             &rows,
-            scene,
+            r,
             &out.join(format!("{scene}.svg")),
             &out.join(format!("{scene}.png")),
         )?;
