@@ -37,6 +37,11 @@ impl PackedSpring {
             0.0
         }
     }
+
+    /// `h/h_c` for a step `h`, `h_c = π/ω0`.
+    pub fn step_ratio(&self, h: f64) -> f64 {
+        h * self.omega0_sq().sqrt() / std::f64::consts::PI
+    }
     /// `c/(2μ)`, 0 when both ends are pinned.
     pub fn alpha(&self) -> f64 {
         if self.mu.is_finite() {

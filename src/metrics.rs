@@ -54,7 +54,7 @@ pub fn worst_step_ratio(packed: &Packed, h: f64) -> Option<(f64, usize)> {
     packed
         .all_springs()
         .enumerate()
-        .map(|(k, s)| (h * s.omega0_sq().sqrt() / std::f64::consts::PI, k))
+        .map(|(k, s)| (s.step_ratio(h), k))
         .max_by(|a, b| a.0.total_cmp(&b.0))
 }
 

@@ -91,7 +91,7 @@ pub fn run_cloth(
 ) -> Result<(Vec<DVec3>, f64), String> {
     let (builder, index) = rapier_cloth(cloth)?;
     let mut world = PhysicsWorld::new();
-    world.gravity = Vector::new(gravity.x as f32, gravity.y as f32, gravity.z as f32);
+    world.gravity = gravity.as_vec3();
     world.integration_parameters.num_solver_iterations = substeps;
     let handle = insert(&mut world, builder.no_surface_collider(), cloth);
     Ok(timed_run(&mut world, handle, seconds, cloth, index))
@@ -124,11 +124,7 @@ pub fn drape_on_ball(
 fn insert(world: &mut PhysicsWorld, builder: SoftBodyBuilder, cloth: &Cloth) -> SoftBodyHandle {
     let pinned = builder.pinned.clone();
     let handle = world.insert_soft_body(builder);
-    let v = Vector::new(
-        cloth.velocity[0] as f32,
-        cloth.velocity[1] as f32,
-        cloth.velocity[2] as f32,
-    );
+    let v = DVec3::from(cloth.velocity).as_vec3();
     let body = &mut world.soft_bodies[handle];
     for i in 0..body.num_particles() {
         if !pinned.contains(&(i as u32)) {

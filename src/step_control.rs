@@ -260,7 +260,7 @@ pub fn aliasing(packed: &Packed, h: f64, tolerance: f64) -> Option<(usize, f64)>
     packed
         .all_springs()
         .enumerate()
-        .map(|(k, s)| (k, h * s.omega0_sq().sqrt() / std::f64::consts::PI))
+        .map(|(k, s)| (k, s.step_ratio(h)))
         .filter(|&(_, r)| r >= 0.5 && (r - r.round()).abs() <= tolerance * r)
         .min_by(|a, b| {
             (a.1 - a.1.round())

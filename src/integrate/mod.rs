@@ -72,15 +72,17 @@ impl Integrator {
         )
     }
 
-    /// Whether it sweeps the springs in colour order.
-    pub fn needs_colouring(self) -> bool {
+    /// Whether it applies the closed form spring by spring in colour order (Gauss–Seidel).
+    fn sweeps(self) -> bool {
         matches!(
             self,
-            Integrator::HarmonicGs
-                | Integrator::HarmonicSgs
-                | Integrator::HarmonicForcedGs
-                | Integrator::Xpbd
+            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
         )
+    }
+
+    /// Whether it needs the springs' colouring (the Gauss–Seidel sweeps and XPBD).
+    pub fn needs_colouring(self) -> bool {
+        self.sweeps() || self == Integrator::Xpbd
     }
 
     pub fn name(self) -> &'static str {
@@ -310,10 +312,7 @@ impl Solver {
             }
         }
         self.swept.clear();
-        if matches!(
-            self.integrator,
-            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
-        ) {
+        if self.integrator.sweeps() {
             gauss_seidel::order(packed, &self.lin, &mut self.swept);
         }
         self.h = h;
