@@ -56,6 +56,61 @@ def spring_gs(x, v, h, zeta, displacement):
         x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
 
 
+def spring_sgs(x, v, h, zeta, displacement, sweeps=2):
+    """Symmetric coloured Gauss-Seidel (harmonic-sgs): `sweeps` alternating sweeps, each applying
+    1/sweeps of the closed form's impulse (and, with `displacement`, of its displacement D)."""
+    inv = [0.0] + [1.0] * N
+    v0, dx = v[:], [0.0] * (N + 1)
+    for k in range(sweeps):
+        order = [(0, a) for a in range(0, N, 2)] + [(1, a) for a in range(1, N, 2)]
+        if k % 2 == 1:
+            order.reverse()
+        for _, a in order:
+            b = a + 1
+            mu = 1 / (inv[a] + inv[b])
+            p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
+            wa = inv[a] / (inv[a] + inv[b])
+            d, dd = x[b] - x[a], v[b] - v[a]
+            phi, big_d = (p * d + q * dd) / sweeps, (r * d + s * dd) / sweeps
+            v[a] -= wa * phi
+            v[b] += (1 - wa) * phi
+            if displacement:
+                dx[a] -= wa * big_d
+                dx[b] += (1 - wa) * big_d
+    for i in range(1, N + 1):
+        x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
+
+
+def spring_iterated(x, v, h, zeta, displacement, sweeps):
+    """Iterated spring Gauss-Seidel: each of `sweeps` sweeps recomputes every spring's closed form
+    from the start stretch and the stretch rate its neighbours' latest impulses give it (its own
+    removed), and applies the difference to what it applied before: a fixed-point iteration
+    toward a step in which every spring sees the others' impulses, implicitly coupled."""
+    inv = [0.0] + [1.0] * N
+    v0, dx = v[:], [0.0] * (N + 1)
+    applied = [(0.0, 0.0)] * N
+    for k in range(sweeps):
+        order = [a for a in range(0, N, 2)] + [a for a in range(1, N, 2)]
+        if k % 2 == 1:
+            order.reverse()
+        for a in order:
+            b = a + 1
+            mu = 1 / (inv[a] + inv[b])
+            p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
+            wa = inv[a] / (inv[a] + inv[b])
+            old_phi, old_d = applied[a]
+            d, dd = x[b] - x[a], v[b] - v[a] - old_phi
+            phi, big_d = p * d + q * dd, r * d + s * dd
+            v[a] -= wa * (phi - old_phi)
+            v[b] += (1 - wa) * (phi - old_phi)
+            if displacement:
+                dx[a] -= wa * (big_d - old_d)
+                dx[b] += (1 - wa) * (big_d - old_d)
+            applied[a] = (phi, big_d)
+    for i in range(1, N + 1):
+        x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
+
+
 def vertex_exact(x, v, h, zeta, neighbours):
     """Coloured Gauss-Seidel over particles: each particle follows its exact oscillation
     about its neighbours, which either move uniformly from where they are now ("moving"),
@@ -105,6 +160,15 @@ def translation_kept(step):
 VARIANTS = {
     "harmonic-gs (plain update, for reference)": lambda x, v, h, z: spring_gs(x, v, h, z, False),
     "spring GS + exact displacement": lambda x, v, h, z: spring_gs(x, v, h, z, True),
+    "harmonic-sgs (plain update, for reference)":
+        lambda x, v, h, z: spring_sgs(x, v, h, z, False),
+    "spring SGS + exact displacement": lambda x, v, h, z: spring_sgs(x, v, h, z, True),
+    "iterated spring GS, 2 sweeps": lambda x, v, h, z: spring_iterated(x, v, h, z, False, 2),
+    "iterated spring GS, 4 sweeps": lambda x, v, h, z: spring_iterated(x, v, h, z, False, 4),
+    "iterated spring GS + exact displacement, 2 sweeps":
+        lambda x, v, h, z: spring_iterated(x, v, h, z, True, 2),
+    "iterated spring GS + exact displacement, 4 sweeps":
+        lambda x, v, h, z: spring_iterated(x, v, h, z, True, 4),
     "vertex exact, neighbours moving": lambda x, v, h, z: vertex_exact(x, v, h, z, "moving"),
     "vertex exact, neighbours moving from start":
         lambda x, v, h, z: vertex_exact(x, v, h, z, "moving from start"),
