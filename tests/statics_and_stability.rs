@@ -83,6 +83,60 @@ fn single_spring_thresholds_match_the_oscillator_bounds() {
 }
 
 #[test]
+fn harmonic_single_spring_thresholds_match_their_closed_forms() {
+    use std::f64::consts::PI;
+    // Undamped, θ = ωh: the closed form gives p h = −θ sin θ, q = cos θ − 1, and with
+    // x += h v_new the one-spring map has det 1 + q, trace 2 + p h + q.
+    // - One impulse (Jacobi, Gauss–Seidel, forced: alone, a spring has no other force): Jury's
+    //   |trace| ≤ 1 + det is 2 cos(θ/2) ≥ θ sin(θ/2), i.e. (θ/2) tan(θ/2) ≤ 1.
+    // - Two half impulses (symmetric sweeps): p and q scale by 1 + q/4, det = cos⁴(θ/2) and
+    //   trace − (1 + det) = −θ sin θ (3 + cos θ)/4: stable exactly while sin θ ≥ 0, i.e. h ≤ h_c.
+    let (mut lo, mut hi) = (0.0, PI / 2.0);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if mid * mid.tan() < 1.0 {
+            lo = mid
+        } else {
+            hi = mid
+        }
+    }
+    let one_impulse = 2.0 * lo / PI; // 0.5477
+    let p = pack(&stability::pair(1.0, 0.0, false, Start::Equilibrium).0);
+    for (integrator, exact) in [
+        (Integrator::Harmonic, one_impulse),
+        (Integrator::HarmonicGs, one_impulse),
+        (Integrator::HarmonicForced, one_impulse),
+        (Integrator::HarmonicForcedGs, one_impulse),
+        (Integrator::HarmonicSgs, 1.0),
+    ] {
+        let t = stability::threshold(&p, integrator, false, 2.0).expect("bounded");
+        println!("{integrator}: {t:.4} (exact {exact:.4})");
+        assert!(
+            (t - exact).abs() < 0.01 * exact,
+            "{integrator}: {t} vs {exact}"
+        );
+    }
+}
+
+#[test]
+fn implicit_euler_is_stable_at_every_step_on_the_threshold_systems() {
+    // MATH.md's study: ∞ on every system (implicit Euler is A-stable on a linear network).
+    for study in stability::threshold_systems() {
+        let p = pack(&study.scene);
+        let hc = stability::h_crit(&p);
+        for ratio in [0.5, 1.0, 2.0, 4.0, 8.0625] {
+            let g = stability::growth_rate(&p, Integrator::ImplicitEuler, false, ratio * hc, 2000)
+                .expect("runs");
+            assert!(
+                g <= 1.0 + stability::GROWTH_TOL,
+                "{} at {ratio} h_c: growth {g}",
+                study.name
+            );
+        }
+    }
+}
+
+#[test]
 fn relaxed_cloth_is_a_fixed_point() {
     // The relaxed 16×16 cloth barely moves under the RK4 reference (an independent integrator).
     let (scene, strain) = stability::cloth_case(16, 0.0, Start::Equilibrium);
