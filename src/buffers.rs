@@ -582,17 +582,18 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
         .iter()
         .map(|(e, c)| (e, c.clone()))
         .collect();
-    cloths.sort_unstable_by_key(|(e, c)| (c.first, e.id()));
+    cloths.sort_unstable_by_key(|(e, c)| (c.grid.first, e.id()));
     let mut end = 0u64;
     for (e, c) in cloths {
         let bad = |what: String| SimError::BadCloth { cloth: e, what };
-        if c.cols == 0 || c.rows == 0 {
+        let g = c.grid;
+        if g.cols == 0 || g.rows == 0 {
             return Err(bad(format!(
                 "grid must be at least 1 × 1, got {} × {}",
-                c.cols, c.rows
+                g.cols, g.rows
             )));
         }
-        let range = c.range();
+        let range = g.range();
         if range.end > u32::MAX as u64 {
             return Err(bad(format!("scene indices {range:?} overflow u32")));
         }
@@ -643,8 +644,8 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
         grids.push(PackedGrid {
             entity: e,
             base: base as u32,
-            cols: c.cols,
-            rows: c.rows,
+            cols: g.cols,
+            rows: g.rows,
             links,
         });
     }

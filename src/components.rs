@@ -48,16 +48,44 @@ pub struct Spring {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub struct SceneIndex(pub u32);
 
-/// A cloth's springs as one component: the particles with scene indices `first ..
-/// first + cols·rows` form a `cols × rows` grid (row-major), and each [`GridLink`] joins every
-/// particle `(c, r)` to `(c + dc, r + dr)` where that exists. The topology is implicit, so the
-/// springs cost no memory each; scene cloths are built this way.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ClothSprings {
+/// A cloth's particles: scene indices `first .. first + cols·rows`, a `cols × rows` grid,
+/// row-major.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClothGrid {
     /// Scene index of particle `(0, 0)`.
     pub first: u32,
     pub cols: u32,
     pub rows: u32,
+}
+
+impl ClothGrid {
+    /// Scene indices covered, `first .. first + cols·rows` (u64: an unchecked grid may pass u32).
+    pub fn range(&self) -> std::ops::Range<u64> {
+        let first = self.first as u64;
+        first..first + self.cols as u64 * self.rows as u64
+    }
+
+    /// Appends the grid's triangles, as scene indices (counter-clockwise seen from the side
+    /// the cloth's normal points to: +y for horizontal cloths, +z for vertical ones).
+    pub fn triangles(&self, out: &mut Vec<[u32; 3]>) {
+        let cols = self.cols;
+        for row in 0..self.rows.saturating_sub(1) {
+            for col in 0..cols.saturating_sub(1) {
+                let a = self.first + row * cols + col;
+                let (b, c) = (a + 1, a + cols);
+                out.push([a, c, b]);
+                out.push([b, c, c + 1]);
+            }
+        }
+    }
+}
+
+/// A cloth's springs as one component: each [`GridLink`] joins every particle `(c, r)` of the
+/// grid to `(c + dc, r + dr)` where that exists. The topology is implicit, so the springs cost
+/// no memory each; scene cloths are built this way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClothSprings {
+    pub grid: ClothGrid,
     pub links: Vec<GridLink>,
 }
 
@@ -75,17 +103,11 @@ pub struct GridLink {
 }
 
 impl ClothSprings {
-    /// Scene indices covered, `first .. first + cols·rows`.
-    pub fn range(&self) -> std::ops::Range<u64> {
-        let first = self.first as u64;
-        first..first + self.cols as u64 * self.rows as u64
-    }
-
     /// Springs in all.
     pub fn spring_count(&self) -> u64 {
         self.links
             .iter()
-            .map(|l| l.count(self.cols, self.rows))
+            .map(|l| l.count(self.grid.cols, self.grid.rows))
             .sum()
     }
 }

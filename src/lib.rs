@@ -55,7 +55,9 @@ pub mod statics;
 pub mod step_control;
 
 pub use backend::Backend;
-pub use components::{ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring};
+pub use components::{
+    ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
+};
 pub use error::{Error, GpuError, SceneError, SimError};
 pub use integrate::Integrator;
 pub use scene::Scene;

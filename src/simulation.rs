@@ -8,8 +8,7 @@ use hecs::{Entity, World};
 
 use crate::backend::Backend;
 use crate::buffers::{GatherOptions, Packed};
-use crate::components::{ClothSprings, Pin, Quarantined, SceneIndex};
-use crate::scene::ClothGrid;
+use crate::components::{ClothGrid, ClothSprings, Pin, Quarantined, SceneIndex};
 use rapier3d::prelude::{ColliderSet, RigidBodySet};
 
 use crate::contacts::{ContactStage, ContactStats, Props};
@@ -115,8 +114,8 @@ pub struct Simulation {
     frame: Frame,
     /// Particles held by [`Simulation::grab`] that were free before.
     grabbed: Vec<Entity>,
-    /// The cloths as units: each one's grid of particles (scene indices).
-    cloths: Vec<(ClothId, ClothGrid)>,
+    /// The cloths as units: each one's entity, whose [`ClothSprings`] holds its grid.
+    cloths: Vec<(ClothId, Entity)>,
     next_cloth: u32,
     /// Particles found non-finite during the current frame (packed indices, may repeat).
     contained: Vec<usize>,
@@ -195,18 +194,27 @@ impl Default for Frame {
 fn frame_triangles<'a>(
     custom: &'a Option<Vec<[u32; 3]>>,
     made: &'a std::sync::OnceLock<Vec<[u32; 3]>>,
-    cloths: &[(ClothId, ClothGrid)],
+    cloths: &[(ClothId, Entity)],
+    world: &World,
 ) -> &'a [[u32; 3]] {
     if let Some(t) = custom {
         return t;
     }
     made.get_or_init(|| {
         let mut out = Vec::new();
-        for (_, grid) in cloths {
-            grid.triangles(&mut out);
+        for &(id, _) in cloths {
+            if let Some(grid) = cloth_grid(world, cloths, id) {
+                grid.triangles(&mut out);
+            }
         }
         out
     })
+}
+
+/// A listed cloth's grid, read from its [`ClothSprings`] (`None` once that is gone).
+fn cloth_grid(world: &World, cloths: &[(ClothId, Entity)], id: ClothId) -> Option<ClothGrid> {
+    let &(_, e) = cloths.iter().find(|(c, _)| *c == id)?;
+    world.get::<&ClothSprings>(e).ok().map(|c| c.grid)
 }
 
 /// What a renderer uploads each frame: positions and normals (f32, one per particle in scene
@@ -448,8 +456,8 @@ impl Simulation {
         }
         let built = scene.build();
         let mut sim = Self::with_props(built.world, built.config, built.props)?;
-        for grid in built.cloths {
-            sim.cloths.push((ClothId(sim.next_cloth), grid));
+        for e in built.cloths {
+            sim.cloths.push((ClothId(sim.next_cloth), e));
             sim.next_cloth += 1;
         }
         Ok(sim)
@@ -501,7 +509,7 @@ impl Simulation {
     /// first frame.
     pub fn render(&mut self, alpha: f64) -> RenderView<'_> {
         let f = &mut self.frame;
-        let triangles = frame_triangles(&f.custom, &f.triangles, &self.cloths);
+        let triangles = frame_triangles(&f.custom, &f.triangles, &self.cloths, &self.world);
         let x = &self.packed.x;
         let prev = if f.prev.len() == x.len() { &f.prev } else { x };
         f.positions.clear();
@@ -534,7 +542,12 @@ impl Simulation {
     /// The triangles drawn by [`Self::render`]: the cloths' from a scene, or your own mesh
     /// over the particles (scene-order indices).
     pub fn triangles(&self) -> &[[u32; 3]] {
-        frame_triangles(&self.frame.custom, &self.frame.triangles, &self.cloths)
+        frame_triangles(
+            &self.frame.custom,
+            &self.frame.triangles,
+            &self.cloths,
+            &self.world,
+        )
     }
 
     pub fn set_triangles(&mut self, triangles: Vec<[u32; 3]>) {
@@ -865,9 +878,10 @@ impl Simulation {
 
     /// The cloths, each with its particles' range in scene order (see [`Self::positions`]).
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
-        self.cloths
-            .iter()
-            .map(|(id, g)| (*id, g.range().start as usize..g.range().end as usize))
+        self.cloths.iter().filter_map(|&(id, _)| {
+            let r = cloth_grid(&self.world, &self.cloths, id)?.range();
+            Some((id, r.start as usize..r.end as usize))
+        })
     }
 
     /// Adds a cloth, validated as a scene's would be, after every particle of the scene
@@ -883,14 +897,17 @@ impl Simulation {
             .map(|i| i.0 + 1)
             .max()
             .unwrap_or(0);
-        let grid = crate::scene::spawn_cloth(&mut self.world, first, cloth);
-        if let Some(custom) = &mut self.frame.custom {
+        let e = crate::scene::spawn_cloth(&mut self.world, first, cloth);
+        let id = ClothId(self.next_cloth);
+        self.next_cloth += 1;
+        self.cloths.push((id, e));
+        if let (Some(custom), Some(grid)) = (
+            &mut self.frame.custom,
+            cloth_grid(&self.world, &self.cloths, id),
+        ) {
             grid.triangles(custom);
         }
         self.frame.triangles.take();
-        let id = ClothId(self.next_cloth);
-        self.next_cloth += 1;
-        self.cloths.push((id, grid));
         self.dirty = true;
         Ok(id)
     }
@@ -903,8 +920,12 @@ impl Simulation {
             .iter()
             .position(|(c, _)| *c == id)
             .ok_or(SimError::UnknownCloth)?;
-        let (_, grid) = self.cloths.remove(k);
-        let range = grid.range();
+        let grid = cloth_grid(&self.world, &self.cloths, id);
+        self.cloths.remove(k);
+        // Its springs' component removed by hand: the particles are no longer a cloth.
+        let grid = grid.ok_or(SimError::UnknownCloth)?;
+        // A built cloth's indices fit u32 (validated).
+        let range = grid.first..grid.first + grid.cols * grid.rows;
         let n = range.end - range.start;
         let doomed: std::collections::HashSet<Entity> = self
             .world
@@ -923,11 +944,11 @@ impl Simulation {
         // Cloth springs over any of its particles go too; later ones move up with theirs.
         let (lo, hi) = (range.start as u64, range.end as u64);
         for (e, c) in self.world.query_mut::<(Entity, &mut ClothSprings)>() {
-            let r = c.range();
+            let r = c.grid.range();
             if r.start < hi && lo < r.end {
                 springs.push(e);
             } else if r.start >= hi {
-                c.first -= n;
+                c.grid.first -= n;
             }
         }
         for e in springs.into_iter().chain(doomed.iter().copied()) {
@@ -950,11 +971,6 @@ impl Simulation {
             }
         }
         self.frame.triangles.take();
-        for (_, g) in &mut self.cloths {
-            if g.first >= range.end {
-                g.first -= n;
-            }
-        }
         self.frame.prev.clear();
         self.dirty = true;
         Ok(())

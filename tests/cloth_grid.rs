@@ -7,7 +7,7 @@ mod common;
 use std::collections::HashMap;
 
 use harmonic::prelude::*;
-use harmonic::{ClothSprings, GridLink, SceneIndex, SimError};
+use harmonic::{ClothGrid, ClothSprings, GridLink, SceneIndex, SimError};
 use hecs::{Entity, World};
 
 fn cloth(n: u32, integrator: Integrator) -> Scene {
@@ -35,11 +35,12 @@ fn springs_one_by_one(mut world: World) -> World {
         .iter()
         .map(|(e, c)| (e, c.clone()))
         .collect();
-    for (e, g) in grids {
+    for (e, cloth) in grids {
         world.despawn(e).unwrap();
+        let g = cloth.grid;
         for r in 0..g.rows as i64 {
             for c in 0..g.cols as i64 {
-                for l in &g.links {
+                for l in &cloth.links {
                     let (c1, r1) = (c + l.offset.0 as i64, r + l.offset.1 as i64);
                     if c1 < 0 || r1 < 0 || c1 >= g.cols as i64 || r1 >= g.rows as i64 {
                         continue;
@@ -143,18 +144,22 @@ fn a_grid_that_no_longer_matches_its_particles_is_a_located_error() {
     let bad_grids = [
         (
             ClothSprings {
-                first: 60,
-                cols: 2,
-                rows: 2,
+                grid: ClothGrid {
+                    first: 60,
+                    cols: 2,
+                    rows: 2,
+                },
                 links: vec![link],
             },
             "overlap",
         ),
         (
             ClothSprings {
-                first: 0,
-                cols: 0,
-                rows: 8,
+                grid: ClothGrid {
+                    first: 0,
+                    cols: 0,
+                    rows: 8,
+                },
                 links: vec![],
             },
             "at least 1 × 1",

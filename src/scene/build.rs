@@ -4,7 +4,7 @@ use glam::DVec3;
 use hecs::{Entity, World};
 
 use super::{Anchor, Cloth, Plane, Rope, Scene, SpringSpec};
-use crate::components::{ClothSprings, GridLink, Particle, Pin, SceneIndex, Spring};
+use crate::components::{ClothGrid, ClothSprings, GridLink, Particle, Pin, SceneIndex, Spring};
 use crate::integrate::Integrator;
 use crate::SimConfig;
 
@@ -14,52 +14,27 @@ pub struct BuiltScene {
     pub config: SimConfig,
     /// The rapier world of the scene's bodies; None without bodies (no contact stage then).
     pub props: Option<crate::contacts::Props>,
-    /// Each cloth's grid of particles.
-    pub cloths: Vec<ClothGrid>,
+    /// Each cloth's entity, holding its [`ClothSprings`] (and so its grid).
+    pub cloths: Vec<Entity>,
 }
 
 impl BuiltScene {
     /// The cloths' triangles (see [`ClothGrid::triangles`]).
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let mut out = Vec::new();
-        for c in &self.cloths {
-            c.triangles(&mut out);
+        for &e in &self.cloths {
+            if let Ok(c) = self.world.get::<&ClothSprings>(e) {
+                c.grid.triangles(&mut out);
+            }
         }
         out
     }
 }
 
-/// A cloth's particles: scene indices `first .. first + cols·rows`, row-major.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct ClothGrid {
-    pub first: u32,
-    pub cols: u32,
-    pub rows: u32,
-}
-
-impl ClothGrid {
-    pub fn range(&self) -> std::ops::Range<u32> {
-        self.first..self.first + self.cols * self.rows
-    }
-
-    /// Appends the cloth's triangles, as scene indices (counter-clockwise seen from the side
-    /// the cloth's normal points to: +y for horizontal cloths, +z for vertical ones).
-    pub fn triangles(&self, out: &mut Vec<[u32; 3]>) {
-        let cols = self.cols;
-        for row in 0..self.rows.saturating_sub(1) {
-            for col in 0..cols.saturating_sub(1) {
-                let a = self.first + row * cols + col;
-                let (b, c) = (a + 1, a + cols);
-                out.push([a, c, b]);
-                out.push([b, c, c + 1]);
-            }
-        }
-    }
-}
-
 /// Spawns `cloth` into `world` (its particles and one [`ClothSprings`]) with its particles
-/// numbered from scene index `first`. The cloth must have passed validation.
-pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> ClothGrid {
+/// numbered from scene index `first`; returns the [`ClothSprings`] entity. The cloth must have
+/// passed validation.
+pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Entity {
     let mut b = Builder {
         world: std::mem::take(world),
         next: first,
@@ -91,7 +66,7 @@ impl SpringSpec {
 struct Builder {
     world: World,
     next: u32,
-    cloths: Vec<ClothGrid>,
+    cloths: Vec<Entity>,
 }
 
 impl Builder {
@@ -192,17 +167,15 @@ impl Builder {
             link(s, (2, 0));
             link(s, (0, 2));
         }
-        self.world.spawn((ClothSprings {
-            first,
-            cols: cols as u32,
-            rows: rows as u32,
+        let e = self.world.spawn((ClothSprings {
+            grid: ClothGrid {
+                first,
+                cols: cols as u32,
+                rows: rows as u32,
+            },
             links,
         },));
-        self.cloths.push(ClothGrid {
-            first,
-            cols: cols as u32,
-            rows: rows as u32,
-        });
+        self.cloths.push(e);
     }
 
     fn rope(&mut self, r: &Rope) {

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::SceneError;
 
-pub use build::{BuiltScene, ClothGrid};
+pub use build::BuiltScene;
 
 /// A vector as `(x, y, z)`.
 pub type V3 = [f64; 3];
