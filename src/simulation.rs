@@ -876,7 +876,8 @@ impl Simulation {
         Ok(())
     }
 
-    /// The cloths, each with its particles' range in scene order (see [`Self::positions`]).
+    /// The cloths, each with its particles' range in scene order (see [`Self::positions`]);
+    /// a cloth whose [`ClothSprings`] were despawned through [`Self::world_mut`] is left out.
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
         self.cloths.iter().filter_map(|&(id, _)| {
             let r = cloth_grid(&self.world, &self.cloths, id)?.range();
@@ -914,6 +915,8 @@ impl Simulation {
 
     /// Removes a cloth: its particles, every spring touching them, their pins and attachments
     /// and its triangles. Later particles move up in scene order to close the gap.
+    /// [`SimError::UnknownCloth`] if there is no such cloth, or if its [`ClothSprings`] were
+    /// despawned through [`Self::world_mut`] (its particles are then ordinary particles).
     pub fn remove_cloth(&mut self, id: ClothId) -> Result<(), SimError> {
         let k = self
             .cloths
@@ -1041,9 +1044,11 @@ impl Simulation {
         &self.world
     }
 
-    /// Mutable access; the next step re-gathers the World (state and topology).
+    /// Mutable access; the next step re-gathers the World (state and topology), and the
+    /// cloths' triangles are made again from their [`ClothSprings`] when next asked for.
     pub fn world_mut(&mut self) -> &mut World {
         self.dirty = true;
+        self.frame.triangles.take();
         &mut self.world
     }
 

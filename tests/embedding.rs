@@ -173,6 +173,36 @@ fn cloths_are_added_and_removed_as_units() {
     );
 }
 
+/// A cloth whose springs component was despawned by hand is no longer a cloth: it leaves the
+/// cloth list and the triangles, removing it is an error, and its particles still step.
+#[test]
+fn a_cloth_without_its_springs_is_not_a_cloth() {
+    let mut sim = Simulation::from_scene(&Scene::parse(TWO_CLOTHS, "two").unwrap()).unwrap();
+    let ids: Vec<_> = sim.cloths().collect();
+    assert_eq!(sim.triangles().len(), 2 * 81 + 2 * 49);
+    let springs: Vec<hecs::Entity> = sim
+        .world_mut()
+        .query_mut::<(hecs::Entity, &harmonic::ClothSprings)>()
+        .into_iter()
+        .filter(|(_, c)| c.grid.first == 0)
+        .map(|(e, _)| e)
+        .collect();
+    assert_eq!(springs.len(), 1);
+    sim.world_mut().despawn(springs[0]).unwrap();
+    assert_eq!(
+        sim.cloths().map(|c| c.1).collect::<Vec<_>>(),
+        vec![100..164]
+    );
+    assert!(matches!(
+        sim.remove_cloth(ids[0].0),
+        Err(harmonic::SimError::UnknownCloth)
+    ));
+    sim.step().unwrap();
+    assert_eq!(sim.positions().len(), 164);
+    assert_eq!(sim.triangles().len(), 2 * 49);
+    assert!(sim.positions().iter().all(|p| p.is_finite()));
+}
+
 #[test]
 fn a_bad_cloth_or_body_added_at_run_time_is_a_located_error() {
     let mut sim = cloth("");
