@@ -202,8 +202,8 @@ fn frame_triangles<'a>(
     }
     made.get_or_init(|| {
         let mut out = Vec::new();
-        for &(id, _) in cloths {
-            if let Some(grid) = cloth_grid(world, cloths, id) {
+        for &(_, e) in cloths {
+            if let Some(grid) = grid_of(world, e) {
                 grid.triangles(&mut out);
             }
         }
@@ -211,9 +211,8 @@ fn frame_triangles<'a>(
     })
 }
 
-/// A listed cloth's grid, read from its [`ClothSprings`] (`None` once that is gone).
-fn cloth_grid(world: &World, cloths: &[(ClothId, Entity)], id: ClothId) -> Option<ClothGrid> {
-    let &(_, e) = cloths.iter().find(|(c, _)| *c == id)?;
+/// A cloth's grid, read from its entity's [`ClothSprings`] (`None` once that is gone).
+fn grid_of(world: &World, e: Entity) -> Option<ClothGrid> {
     world.get::<&ClothSprings>(e).ok().map(|c| c.grid)
 }
 
@@ -879,8 +878,8 @@ impl Simulation {
     /// The cloths, each with its particles' range in scene order (see [`Self::positions`]);
     /// a cloth whose [`ClothSprings`] were despawned through [`Self::world_mut`] is left out.
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
-        self.cloths.iter().filter_map(|&(id, _)| {
-            let r = cloth_grid(&self.world, &self.cloths, id)?.range();
+        self.cloths.iter().filter_map(|&(id, e)| {
+            let r = grid_of(&self.world, e)?.range();
             Some((id, r.start as usize..r.end as usize))
         })
     }
@@ -902,10 +901,7 @@ impl Simulation {
         let id = ClothId(self.next_cloth);
         self.next_cloth += 1;
         self.cloths.push((id, e));
-        if let (Some(custom), Some(grid)) = (
-            &mut self.frame.custom,
-            cloth_grid(&self.world, &self.cloths, id),
-        ) {
+        if let (Some(custom), Some(grid)) = (&mut self.frame.custom, grid_of(&self.world, e)) {
             grid.triangles(custom);
         }
         self.frame.triangles.take();
@@ -923,8 +919,8 @@ impl Simulation {
             .iter()
             .position(|(c, _)| *c == id)
             .ok_or(SimError::UnknownCloth)?;
-        let grid = cloth_grid(&self.world, &self.cloths, id);
-        self.cloths.remove(k);
+        let (_, e) = self.cloths.remove(k);
+        let grid = grid_of(&self.world, e);
         // Its springs' component removed by hand: the particles are no longer a cloth.
         let grid = grid.ok_or(SimError::UnknownCloth)?;
         // A built cloth's indices fit u32 (validated).
