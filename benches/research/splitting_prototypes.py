@@ -35,63 +35,22 @@ def oscillate(u, w, h, omega, zeta):
             e * (w * c - (omega * omega * u + zeta * omega * w) / wd * s))
 
 
-def spring_gs(x, v, h, zeta, displacement):
-    """Coloured Gauss-Seidel over springs (harmonic-gs); `displacement` adds the closed form's
-    displacement D beyond free drift, accumulated over the sweep (x += h v0 + sum D)."""
-    inv = [0.0] + [1.0] * N
-    v0, dx = v[:], [0.0] * (N + 1)
-    for first in (0, 1):
-        for a in range(first, N, 2):
-            b = a + 1
-            mu = 1 / (inv[a] + inv[b])
-            p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
-            wa = inv[a] / (inv[a] + inv[b])
-            d, dd = x[b] - x[a], v[b] - v[a]
-            phi, big_d = p * d + q * dd, r * d + s * dd
-            v[a] -= wa * phi
-            v[b] += (1 - wa) * phi
-            if displacement:
-                dx[a] -= wa * big_d
-                dx[b] += (1 - wa) * big_d
-    for i in range(1, N + 1):
-        x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
-
-
-def spring_sgs(x, v, h, zeta, displacement, sweeps=2):
-    """Symmetric coloured Gauss-Seidel (harmonic-sgs): `sweeps` alternating sweeps, each applying
-    1/sweeps of the closed form's impulse (and, with `displacement`, of its displacement D)."""
-    inv = [0.0] + [1.0] * N
-    v0, dx = v[:], [0.0] * (N + 1)
-    for k in range(sweeps):
-        order = [(0, a) for a in range(0, N, 2)] + [(1, a) for a in range(1, N, 2)]
-        if k % 2 == 1:
-            order.reverse()
-        for _, a in order:
-            b = a + 1
-            mu = 1 / (inv[a] + inv[b])
-            p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
-            wa = inv[a] / (inv[a] + inv[b])
-            d, dd = x[b] - x[a], v[b] - v[a]
-            phi, big_d = (p * d + q * dd) / sweeps, (r * d + s * dd) / sweeps
-            v[a] -= wa * phi
-            v[b] += (1 - wa) * phi
-            if displacement:
-                dx[a] -= wa * big_d
-                dx[b] += (1 - wa) * big_d
-    for i in range(1, N + 1):
-        x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
-
-
-def spring_iterated(x, v, h, zeta, displacement, sweeps):
-    """Iterated spring Gauss-Seidel: each of `sweeps` sweeps recomputes every spring's closed form
-    from the start stretch and the stretch rate its neighbours' latest impulses give it (its own
-    removed), and applies the difference to what it applied before: a fixed-point iteration
-    toward a step in which every spring sees the others' impulses, implicitly coupled."""
+def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=False):
+    """Coloured Gauss-Seidel over springs with the closed form, `sweeps` sweeps alternating
+    direction. `displacement` adds the closed form's displacement D beyond free drift,
+    accumulated over the sweeps (x += h v0 + sum D); otherwise x += h v_new.
+    - one sweep: harmonic-gs;
+    - `split`: each sweep applies 1/sweeps of the impulse (and of D): harmonic-sgs;
+    - `iterated`: each sweep re-solves every spring from the start stretch and the stretch rate
+      its neighbours' latest impulses give it (its own removed) and applies the difference to
+      what it applied before: a fixed-point iteration toward a step in which every spring sees
+      the others' impulses, implicitly coupled."""
     inv = [0.0] + [1.0] * N
     v0, dx = v[:], [0.0] * (N + 1)
     applied = [(0.0, 0.0)] * N
+    scale = 1 / sweeps if split else 1
     for k in range(sweeps):
-        order = [a for a in range(0, N, 2)] + [a for a in range(1, N, 2)]
+        order = list(range(0, N, 2)) + list(range(1, N, 2))
         if k % 2 == 1:
             order.reverse()
         for a in order:
@@ -99,9 +58,9 @@ def spring_iterated(x, v, h, zeta, displacement, sweeps):
             mu = 1 / (inv[a] + inv[b])
             p, q, r, s = propagator(1 / mu, zeta / math.sqrt(mu), h)
             wa = inv[a] / (inv[a] + inv[b])
-            old_phi, old_d = applied[a]
+            old_phi, old_d = applied[a] if iterated else (0.0, 0.0)
             d, dd = x[b] - x[a], v[b] - v[a] - old_phi
-            phi, big_d = p * d + q * dd, r * d + s * dd
+            phi, big_d = scale * (p * d + q * dd), scale * (r * d + s * dd)
             v[a] -= wa * (phi - old_phi)
             v[b] += (1 - wa) * (phi - old_phi)
             if displacement:
@@ -248,17 +207,17 @@ def errors(variants, ratios=(0.5, 1, 2, 4), zeta=0.2):
 
 
 VARIANTS = {
-    "harmonic-gs (plain update, for reference)": lambda x, v, h, z: spring_gs(x, v, h, z, False),
-    "spring GS + exact displacement": lambda x, v, h, z: spring_gs(x, v, h, z, True),
+    "harmonic-gs (plain update, for reference)": lambda x, v, h, z: spring_sweeps(x, v, h, z, False),
+    "spring GS + exact displacement": lambda x, v, h, z: spring_sweeps(x, v, h, z, True),
     "harmonic-sgs (plain update, for reference)":
-        lambda x, v, h, z: spring_sgs(x, v, h, z, False),
-    "spring SGS + exact displacement": lambda x, v, h, z: spring_sgs(x, v, h, z, True),
-    "iterated spring GS, 2 sweeps": lambda x, v, h, z: spring_iterated(x, v, h, z, False, 2),
-    "iterated spring GS, 4 sweeps": lambda x, v, h, z: spring_iterated(x, v, h, z, False, 4),
+        lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 2, split=True),
+    "spring SGS + exact displacement": lambda x, v, h, z: spring_sweeps(x, v, h, z, True, 2, split=True),
+    "iterated spring GS, 2 sweeps": lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 2, iterated=True),
+    "iterated spring GS, 4 sweeps": lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 4, iterated=True),
     "iterated spring GS + exact displacement, 2 sweeps":
-        lambda x, v, h, z: spring_iterated(x, v, h, z, True, 2),
+        lambda x, v, h, z: spring_sweeps(x, v, h, z, True, 2, iterated=True),
     "iterated spring GS + exact displacement, 4 sweeps":
-        lambda x, v, h, z: spring_iterated(x, v, h, z, True, 4),
+        lambda x, v, h, z: spring_sweeps(x, v, h, z, True, 4, iterated=True),
     "vertex block descent (implicit Euler), 1 pass":
         lambda x, v, h, z: vertex_block_descent(x, v, h, z, 1),
     "vertex block descent (implicit Euler), 2 passes":
