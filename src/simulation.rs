@@ -924,7 +924,8 @@ impl Simulation {
         // Its springs' component removed by hand: the particles are no longer a cloth.
         let grid = grid.ok_or(SimError::UnknownCloth)?;
         // A built cloth's indices fit u32 (validated).
-        let range = grid.first..grid.first + grid.cols * grid.rows;
+        let range = grid.range();
+        let range = range.start as u32..range.end as u32;
         let n = range.end - range.start;
         let doomed: std::collections::HashSet<Entity> = self
             .world
