@@ -71,17 +71,33 @@ def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=F
         x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
 
 
-def vertex_block_descent(x, v, h, zeta, iterations, rho=0.0):
+class WarmStart:
+    """The previous step's acceleration, for vertex block descent's first guess (reset when a
+    new run starts: another state list, step or damping)."""
+
+    def __init__(self, beta):
+        self.beta, self.run, self.accel = beta, None, None
+
+    def guess(self, x, y, h, zeta):
+        if self.run is None or self.run[0] is not x or self.run[1:] != (h, zeta):
+            self.run, self.accel = (x, h, zeta), [0.0] * (N + 1)
+        return [y[i] + self.beta * h * h * self.accel[i] for i in range(N + 1)]
+
+
+def vertex_block_descent(x, v, h, zeta, iterations, rho=0.0, warm=None):
     """Vertex block descent on implicit Euler's incremental potential (no closed form): start
     from the inertial guess y = x + h v, then `iterations` coloured Gauss-Seidel passes, each
     particle minimising over its own position with its neighbours fixed (spring and damping
     terms of implicit Euler), and v = (x_new - x) / h. With `rho` > 0 the passes are
-    Chebyshev-accelerated for an assumed spectral radius `rho` of the plain pass."""
+    Chebyshev-accelerated for an assumed spectral radius `rho` of the plain pass. With `warm`
+    (a WarmStart) the first guess adds beta h^2 times the previous step's acceleration, as
+    the vertex block descent paper's adaptive initialisation does (there along gravity)."""
     c = 2 * zeta * math.sqrt(0.5)  # per-spring damping for the pair's reduced mass 1/2
-    start = x[:]
+    start, v0 = x[:], v[:]
     y = [x[i] + h * v[i] for i in range(N + 1)]
     y[0] = x[0]
-    new = y[:]
+    new = y[:] if warm is None else warm.guess(x, y, h, zeta)
+    new[0] = x[0]
     prev, omega = y[:], 1.0
     for k in range(iterations):
         before = new[:]
@@ -101,6 +117,8 @@ def vertex_block_descent(x, v, h, zeta, iterations, rho=0.0):
     for i in range(1, N + 1):
         v[i] = (new[i] - start[i]) / h
         x[i] = new[i]
+        if warm is not None:
+            warm.accel[i] = (v[i] - v0[i]) / h
 
 
 def implicit_euler(x, v, h, zeta):
@@ -228,6 +246,16 @@ VARIANTS = {
         lambda x, v, h, z: vertex_block_descent(x, v, h, z, 3, 0.8),
     "vertex block descent, 3 Chebyshev passes (rho = 0.9)":
         lambda x, v, h, z: vertex_block_descent(x, v, h, z, 3, 0.9),
+    "vertex block descent, warm start (beta = 1), 2 passes":
+        lambda x, v, h, z, w=WarmStart(1.0): vertex_block_descent(x, v, h, z, 2, warm=w),
+    "vertex block descent, warm start (beta = 1), 3 passes":
+        lambda x, v, h, z, w=WarmStart(1.0): vertex_block_descent(x, v, h, z, 3, warm=w),
+    "vertex block descent, warm start (beta = 0.6), 3 passes":
+        lambda x, v, h, z, w=WarmStart(0.6): vertex_block_descent(x, v, h, z, 3, warm=w),
+    "vertex block descent, warm start (beta = 0.5), 3 passes":
+        lambda x, v, h, z, w=WarmStart(0.5): vertex_block_descent(x, v, h, z, 3, warm=w),
+    "vertex block descent, warm start (beta = 0.7), 4 Chebyshev passes (rho = 0.7)":
+        lambda x, v, h, z, w=WarmStart(0.7): vertex_block_descent(x, v, h, z, 4, 0.7, warm=w),
     "vertex exact, neighbours moving": lambda x, v, h, z: vertex_exact(x, v, h, z, "moving"),
     "vertex exact, neighbours moving from start":
         lambda x, v, h, z: vertex_exact(x, v, h, z, "moving from start"),
@@ -253,6 +281,16 @@ if __name__ == "__main__":
         # at zeta = 0.2 stable to 2.0625 h_c (table above)
         "vertex block descent, 3 Chebyshev passes (rho = 0.9)":
             (VARIANTS["vertex block descent, 3 Chebyshev passes (rho = 0.9)"], 2.0625),
+        # warm starts: stable at zeta = 0.2 to 0.75, 2.0625, every point and 2.0625 (table above)
+        "vertex block descent, warm start (beta = 1), 3 passes":
+            (VARIANTS["vertex block descent, warm start (beta = 1), 3 passes"], 0.75),
+        "vertex block descent, warm start (beta = 0.6), 3 passes":
+            (VARIANTS["vertex block descent, warm start (beta = 0.6), 3 passes"], 2.0625),
+        "vertex block descent, warm start (beta = 0.5), 3 passes":
+            (VARIANTS["vertex block descent, warm start (beta = 0.5), 3 passes"], math.inf),
+        "vertex block descent, warm start (beta = 0.7), 4 Chebyshev passes (rho = 0.7)":
+            (VARIANTS["vertex block descent, warm start (beta = 0.7), 4 Chebyshev passes (rho = 0.7)"],
+             2.0625),
         # at zeta = 0.2 stable to 1 h_c (table above)
         "harmonic-sgs": (VARIANTS["harmonic-sgs (plain update, for reference)"], 1),
     })
