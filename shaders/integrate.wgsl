@@ -1,5 +1,6 @@
-// The GPU step: the WGSL mirror of src/integrate/mod.rs (spring_pass, particle_pass) and
-// src/integrate/gauss_seidel.rs (add_gravity, sweep, drift). Each function names its Rust mirror;
+// The GPU step: the WGSL mirror of src/integrate/mod.rs (spring_pass, particle_pass),
+// src/integrate/grid.rs (the cloth grid pass) and src/integrate/gauss_seidel.rs (add_gravity,
+// sweep, drift). Each function names its Rust mirror;
 // tests/gpu.rs holds the two together. No atomics: every particle gathers its springs' changes
 // over a CSR list, so GL and Vulkan adapters both work and results are deterministic.
 //
@@ -14,6 +15,8 @@ override RATE: bool = true;
 override PINS: bool = true;
 // 0: v += Δv + g h; x += h v (symplectic Euler, harmonic). 1: x += h v; v += Δv + g h.
 override UPDATE: u32 = 0u;
+// Cloth grids are kept whole (grid_pass runs); false when every spring is in `ends`.
+override GRIDS: bool = false;
 
 struct Params {
     gravity: vec3<f32>,
@@ -31,7 +34,9 @@ struct Position {
     lo: vec4<f32>,
 }
 
-// A spring's ends are `ends[k]`; the rest is here. φ = p δ + q δ̇ (coefficients from
+// A spring's ends are `ends[k]`; the rest is here. Past the springs (k ≥ params.springs), the
+// cloth grids' links: `ends` holds the link's (dc, dr) as i32 bits, and p, q are in force form
+// (the particle's own inverse mass scales φ n; wa unused). φ = p δ + q δ̇ (coefficients from
 // integrate::harmonic, computed once per h on the CPU); wa is end a's share of the relative
 // velocity change, m_b/(m_a+m_b) (0 when a is pinned), and end b's is 1 − wa. Two arrays, not
 // one struct, so no binding exceeds 128 MiB (lavapipe's limit) before 8 M springs.
@@ -48,17 +53,23 @@ struct Entry {
     coef: f32,
 }
 
-// The springs of one colour: springs[start .. start + count].
+// The springs of one colour: springs[start .. start + count]. Or one cloth grid: particles
+// start .. start + count, row-major, `cols` to a row, its links at params.springs + links
+// .. + links + link_count in `ends` and `coefs`.
 struct Range {
     start: u32,
     count: u32,
+    cols: u32,
+    links: u32,
+    link_count: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
 @group(0) @binding(1) var<storage, read_write> pos: array<Position>;
-// xyz velocity; w = 1 for a free particle, 0 for a pinned one.
+// xyz velocity; w = the inverse mass, 0 for a pinned particle.
 @group(0) @binding(2) var<storage, read_write> vel: array<vec4<f32>>;
 @group(0) @binding(3) var<storage, read> ends: array<vec2<u32>>;
 @group(0) @binding(4) var<storage, read> coefs: array<Coef>;
@@ -142,7 +153,54 @@ fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
     sdv[k] = vec4<f32>(guard(r.w * r.xyz, e, va, vb), 0.0);
 }
 
-// Mirrors integrate::particle_pass: each particle gathers its springs' changes and moves.
+// Mirrors grid::Ctx::anchor_row for one grid: each particle sums −φ n / m over the links that
+// reach it, from either end (each spring is evaluated at both its ends, with n pointing away
+// from the particle), into sdv[params.springs + i] for particle_pass.
+@compute @workgroup_size(WORKGROUP)
+fn grid_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let j = linear(id, groups);
+    if j >= colour.count {
+        return;
+    }
+    let i = colour.start + j;
+    if !free(i) {
+        return;
+    }
+    let cols = i32(colour.cols);
+    let rows = i32(colour.count / colour.cols);
+    let c = i32(j % colour.cols);
+    let r = i32(j / colour.cols);
+    let inv = vel[i].w;
+    var va = vec3<f32>(0.0);
+    if RATE {
+        va = vel[i].xyz;
+    }
+    var dv = vec3<f32>(0.0);
+    for (var k = colour.links; k < colour.links + colour.link_count; k++) {
+        let offset = bitcast<vec2<i32>>(ends[params.springs + k]);
+        let lc = coefs[params.springs + k];
+        for (var side = -1; side <= 1; side += 2) {
+            let cb = c + side * offset.x;
+            let rb = r + side * offset.y;
+            if cb < 0 || cb >= cols || rb < 0 || rb >= rows {
+                continue;
+            }
+            let b = colour.start + u32(rb * cols + cb);
+            var vb = vec3<f32>(0.0);
+            if RATE {
+                vb = vel[b].xyz;
+            }
+            let s = spring_response(vec2<u32>(i, b), lc, va, vb);
+            // The guard keeps a degenerate spring's NaN to its two ends over the substeps of
+            // one submit (the CPU grid pass needs none: its quarantine runs every substep).
+            dv -= guard(inv * (s.w * s.xyz), vec2<u32>(i, b), va, vb);
+        }
+    }
+    sdv[params.springs + i] = vec4<f32>(dv, 0.0);
+}
+
+// Mirrors integrate::particle_pass (and, for a grid's particles, the move at the end of
+// grid::Ctx::band): each particle gathers its springs' changes and moves.
 @compute @workgroup_size(WORKGROUP)
 fn particle_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = linear(id, groups);
@@ -150,6 +208,10 @@ fn particle_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_work
         return;
     }
     var dv = vec3<f32>(0.0);
+    if GRIDS {
+        // What grid_pass summed (zero for a particle in no grid).
+        dv = sdv[params.springs + i].xyz;
+    }
     for (var e = offsets[i]; e < offsets[i + 1u]; e++) {
         let en = entries[e];
         dv += en.coef * sdv[en.spring].xyz;

@@ -784,14 +784,14 @@ impl Simulation {
     }
 
     /// What the step needs packed: cloth grids kept whole for an integrator with a grid pass
-    /// on the CPU, the colouring only for the sweeping integrators and the GPU.
+    /// (on either back end), the colouring only for the sweeping integrators and the GPU.
     fn gather_options(&self) -> GatherOptions {
         #[cfg(feature = "gpu")]
         let gpu = self.gpu.is_some();
         #[cfg(not(feature = "gpu"))]
         let gpu = false;
         GatherOptions {
-            keep_grids: !gpu && self.config.integrator.runs_on_grids(),
+            keep_grids: self.config.integrator.runs_on_grids(),
             colouring: gpu || self.config.integrator.needs_colouring(),
         }
     }

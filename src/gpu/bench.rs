@@ -5,8 +5,12 @@
 use std::fmt::Write;
 use std::time::{Duration, Instant};
 
+use hecs::{Entity, World};
+
 use crate::backend::Backend;
 use crate::bench::hanging_cloth;
+use crate::buffers::Packed;
+use crate::components::{ClothSprings, Spring};
 use crate::error::SimError;
 use crate::gpu::GpuContext;
 use crate::integrate::Integrator;
@@ -24,6 +28,9 @@ pub struct ScalingRow {
     pub gpu_substeps_per_s: f64,
     pub cpu_substeps_per_s: Option<f64>,
     pub bytes_per_substep: u64,
+    /// For an integrator with a grid pass: the GPU with the cloth's springs spawned one by one
+    /// instead (substeps/s, bytes/substep).
+    pub one_by_one: Option<(f64, u64)>,
 }
 
 /// A simulation of `scene` at the step automatic control picks for its frame step, then fixed
@@ -33,9 +40,19 @@ fn simulation(
     integrator: Integrator,
     backend: Backend,
 ) -> Result<Simulation, SimError> {
+    simulation_of(scene, Ok, integrator, backend)
+}
+
+/// As [`simulation`], with the built World passed through `edit` first.
+fn simulation_of(
+    scene: &Scene,
+    edit: impl FnOnce(World) -> Result<World, SimError>,
+    integrator: Integrator,
+    backend: Backend,
+) -> Result<Simulation, SimError> {
     let built = scene.build();
     let mut sim = Simulation::new(
-        built.world,
+        edit(built.world)?,
         SimConfig {
             integrator,
             backend,
@@ -51,6 +68,33 @@ fn simulation(
     };
     sim.set_config(config)?;
     Ok(sim)
+}
+
+/// The World with every cloth's springs spawned one by one as [`Spring`]s: how the GPU stepped a
+/// cloth before it had a grid pass, for the comparison column.
+fn springs_one_by_one(mut world: World) -> Result<World, SimError> {
+    let packed = Packed::gather(&world)?;
+    // Packed springs: the World's own first, then the cloths' expanded.
+    let own = world.query::<&Spring>().iter().count();
+    let cloths: Vec<Entity> = world
+        .query::<(Entity, &ClothSprings)>()
+        .iter()
+        .map(|(e, _)| e)
+        .collect();
+    for e in cloths {
+        let _ = world.despawn(e);
+    }
+    let e = &packed.entities;
+    for s in &packed.springs[own..] {
+        world.spawn((Spring {
+            a: e[s.a as usize],
+            b: e[s.b as usize],
+            rest_length: s.rest,
+            stiffness: s.stiffness,
+            damping: s.damping,
+        },));
+    }
+    Ok(world)
 }
 
 /// Median substeps per second of `run(k)` over `repeats`, with `k` grown to fill [`TARGET`].
@@ -141,6 +185,15 @@ pub fn scaling(
         sim.step()?;
         let (particles, springs) = (sim.packed().particle_count(), sim.packed().spring_count());
         drop(sim);
+        let one_by_one = if integrator.runs_on_grids() {
+            progress(&format!("{n}×{n} GPU, springs one by one"));
+            let mut sim = simulation_of(&scene, springs_one_by_one, integrator, Backend::Gpu)?;
+            let r = gpu_rate(&mut sim, repeats)?;
+            sim.step()?;
+            Some(r)
+        } else {
+            None
+        };
         let cpu = if n <= cpu_max {
             progress(&format!("{n}×{n} CPU"));
             let mut cpu = simulation(&scene, integrator, Backend::Cpu)?;
@@ -162,6 +215,7 @@ pub fn scaling(
             gpu_substeps_per_s: gpu,
             cpu_substeps_per_s: cpu,
             bytes_per_substep: bytes,
+            one_by_one,
         });
     }
     Ok(rows)
@@ -254,9 +308,9 @@ pub fn report(
     );
     let _ = writeln!(
         md,
-        "| cloth | particles | springs | GPU substeps/s | GPU M spring-substeps/s | bytes/substep | floor substeps/s | GPU / floor | CPU substeps/s | GPU / CPU |"
+        "| cloth | particles | springs | GPU substeps/s | GPU M spring-substeps/s | bytes/substep | floor substeps/s | GPU / floor | CPU substeps/s | GPU / CPU | GPU, springs one by one: substeps/s (bytes/substep) | grid / one by one |"
     );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         let floor = bandwidth / r.bytes_per_substep as f64;
         let (cpu, ratio) = match r.cpu_substeps_per_s {
@@ -266,9 +320,16 @@ pub fn report(
             ),
             None => ("-".into(), "-".into()),
         };
+        let (one, gain) = match r.one_by_one {
+            Some((rate, bytes)) => (
+                format!("{rate:.0} ({:.1} MB)", bytes as f64 / 1e6),
+                format!("{:.2}×", r.gpu_substeps_per_s / rate),
+            ),
+            None => ("-".into(), "-".into()),
+        };
         let _ = writeln!(
             md,
-            "| {n}² | {} | {} | {:.0} | {:.1} | {:.1} MB | {floor:.0} | {:.2} | {cpu} | {ratio} |",
+            "| {n}² | {} | {} | {:.0} | {:.1} | {:.1} MB | {floor:.0} | {:.2} | {cpu} | {ratio} | {one} | {gain} |",
             r.particles,
             r.springs,
             r.gpu_substeps_per_s,

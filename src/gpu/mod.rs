@@ -5,8 +5,11 @@
 //!   at gather, substeps encoded into one submit, and a staging buffer read only on request.
 //!
 //! The springs go to the device in colour order, so a Gauss–Seidel colour is a contiguous range
-//! and the Jacobi passes index the same array. Coefficients (`p`, `q`) come from the CPU
-//! ([`crate::integrate::harmonic`]), once per `h`: one definition of the spring math.
+//! and the Jacobi passes index the same array. Cloth grids kept whole (symplectic and explicit
+//! Euler) go as their links only: `grid_pass` finds each particle's neighbours from its grid
+//! position, as the CPU grid pass does, with no memory per spring. Coefficients (`p`, `q`) come
+//! from the CPU ([`crate::integrate::harmonic`]), once per `h`: one definition of the spring
+//! math.
 
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -17,7 +20,7 @@ use wgpu::util::DeviceExt;
 use crate::buffers::Packed;
 use crate::error::GpuError;
 use crate::integrate::harmonic::Linear;
-use crate::integrate::{Integrator, SGS_SWEEPS};
+use crate::integrate::{grid, Integrator, SGS_SWEEPS};
 
 pub mod bench;
 pub mod contacts;
@@ -84,20 +87,27 @@ pub struct Entry {
     pub coef: f32,
 }
 
-/// `Range`: one colour's springs.
+/// `Range`: one colour's springs, or one cloth grid's particles and links.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct Range {
     pub start: u32,
     pub count: u32,
+    /// A grid's columns (0 for a colour).
+    pub cols: u32,
+    /// A grid's first link, counted past the springs.
+    pub links: u32,
+    pub link_count: u32,
     pub _pad0: u32,
     pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// How the kernels step: which entry points run, in which order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kernel {
-    /// `spring_pass` then `particle_pass` (harmonic, symplectic and explicit Euler).
+    /// `spring_pass`, `grid_pass` per cloth grid kept whole, then `particle_pass` (harmonic,
+    /// symplectic and explicit Euler).
     Jacobi,
     /// `add_gravity`, `sweeps` colour sweeps alternating direction, `drift`.
     GaussSeidel { sweeps: u32 },
@@ -136,6 +146,8 @@ pub struct Specialisation {
     pub pins: bool,
     /// 0: velocity first; 1: position first (explicit Euler).
     pub update: u32,
+    /// Cloth grids are kept whole: `particle_pass` adds what `grid_pass` summed.
+    pub grids: bool,
 }
 
 impl Specialisation {
@@ -148,9 +160,16 @@ impl Specialisation {
                 .springs
                 .iter()
                 .filter(live)
-                .any(|&k| lin[k as usize].q != 0.0),
+                .any(|&k| lin[k as usize].q != 0.0)
+                || packed
+                    .grids
+                    .iter()
+                    .flat_map(|g| &g.links)
+                    // q = −c h (grid::link_coefficients)
+                    .any(|l| l.damping != 0.0),
             pins: packed.inv_mass.contains(&0.0),
             update: u32::from(integrator == Integrator::ExplicitEuler),
+            grids: !packed.grids.is_empty(),
         }
     }
 
@@ -163,12 +182,13 @@ impl Specialisation {
         }
     }
 
-    fn constants(&self) -> [(&'static str, f64); 4] {
+    fn constants(&self) -> [(&'static str, f64); 5] {
         [
             ("WORKGROUP", WORKGROUP as f64),
             ("RATE", f64::from(u8::from(self.rate))),
             ("PINS", f64::from(u8::from(self.pins))),
             ("UPDATE", self.update as f64),
+            ("GRIDS", f64::from(u8::from(self.grids))),
         ]
     }
 }
@@ -335,6 +355,7 @@ fn describe(info: &wgpu::AdapterInfo) -> String {
 struct Pipelines {
     spec: Specialisation,
     spring_pass: wgpu::ComputePipeline,
+    grid_pass: wgpu::ComputePipeline,
     particle_pass: wgpu::ComputePipeline,
     add_gravity: wgpu::ComputePipeline,
     sweep_colour: wgpu::ComputePipeline,
@@ -352,6 +373,9 @@ struct Buffers {
     bind_group: wgpu::BindGroup,
     /// Colour ranges (start, count), in sweep order.
     colours: Vec<(u32, u32)>,
+    /// Each cloth grid's particles (first, count); their `Range`s follow the colours' in the
+    /// uniform.
+    grids: Vec<(u32, u32)>,
     /// Dynamic-offset stride of the colour uniform.
     colour_stride: u32,
     particles: u32,
@@ -478,6 +502,7 @@ impl GpuSolver {
         self.ctx.scoped("compute pipelines", || Pipelines {
             spec,
             spring_pass: make("spring_pass"),
+            grid_pass: make("grid_pass"),
             particle_pass: make("particle_pass"),
             add_gravity: make("add_gravity"),
             sweep_colour: make("sweep_colour"),
@@ -496,6 +521,12 @@ impl GpuSolver {
         integrator: Integrator,
     ) -> Result<(), GpuError> {
         self.contacts = None;
+        if !packed.grids.is_empty() && self.kernel != Kernel::Jacobi {
+            return Err(GpuError::Device {
+                adapter: self.ctx.describe(),
+                what: format!("{integrator} does not step cloth grids kept whole"),
+            });
+        }
         let mut spec = Specialisation::of(packed, lin, integrator);
         if !self.specialise {
             spec = spec.general();
@@ -510,12 +541,20 @@ impl GpuSolver {
         for (j, &k) in order.iter().enumerate() {
             device_index[k as usize] = j as u32;
         }
+        // The springs' ends, then the grids' link offsets (as i32 bits).
         let ends: Vec<[u32; 2]> = order
             .iter()
             .map(|&k| {
                 let s = &packed.springs[k as usize];
                 [s.a, s.b]
             })
+            .chain(
+                packed
+                    .grids
+                    .iter()
+                    .flat_map(|g| &g.links)
+                    .map(|l| [l.offset.0 as u32, l.offset.1 as u32]),
+            )
             .collect();
         self.host_coefs = order
             .iter()
@@ -529,6 +568,7 @@ impl GpuSolver {
                 }
             })
             .collect();
+        self.host_coefs.extend(grid_coefs(packed, h));
         fill_state(packed, &mut self.host_pos, &mut self.host_vel);
         let (positions, velocities) = (&self.host_pos, &self.host_vel);
         let inc = &packed.incidence;
@@ -552,16 +592,39 @@ impl GpuSolver {
         if colours.is_empty() {
             colours.push((0, 0));
         }
-        let mut colour_bytes = vec![0u8; colours.len() * stride as usize];
-        for (c, &(start, count)) in colours.iter().enumerate() {
-            let r = Range {
+        let mut ranges: Vec<Range> = colours
+            .iter()
+            .map(|&(start, count)| Range {
                 start,
                 count,
                 ..Range::default()
-            };
-            let at = c * stride as usize;
-            colour_bytes[at..at + 16].copy_from_slice(bytemuck::bytes_of(&r));
+            })
+            .collect();
+        let mut links = 0;
+        for g in &packed.grids {
+            ranges.push(Range {
+                start: g.base,
+                count: g.cols * g.rows,
+                cols: g.cols,
+                links,
+                link_count: g.links.len() as u32,
+                ..Range::default()
+            });
+            links += g.links.len() as u32;
         }
+        let grids = packed
+            .grids
+            .iter()
+            .map(|g| (g.base, g.cols * g.rows))
+            .collect();
+        let range_size = std::mem::size_of::<Range>();
+        let mut colour_bytes = vec![0u8; ranges.len() * stride as usize];
+        for (c, r) in ranges.iter().enumerate() {
+            let at = c * stride as usize;
+            colour_bytes[at..at + range_size].copy_from_slice(bytemuck::bytes_of(r));
+        }
+        // Per spring, then (with grids) per particle: what grid_pass summed, zero elsewhere.
+        let sdv_len = order.len() + if packed.grids.is_empty() { 0 } else { n };
         let params = Params {
             gravity: gravity.as_vec3().to_array(),
             h: h as f32,
@@ -602,7 +665,9 @@ impl GpuSolver {
                 bytemuck::cast_slice(host_coefs),
                 U::STORAGE | U::COPY_DST,
             );
-            let sdv = init("sdv", &poison(host_coefs.len() * 16), rw);
+            let mut sdv_bytes = poison(order.len() * 16);
+            sdv_bytes.resize(sdv_len * 16, 0);
+            let sdv = init("sdv", &sdv_bytes, rw);
             let offsets = init("offsets", bytemuck::cast_slice(&offsets), U::STORAGE);
             let entries = init("entries", bytemuck::cast_slice(&entries), U::STORAGE);
             let colour = init("colours", &colour_bytes, U::UNIFORM);
@@ -630,7 +695,7 @@ impl GpuSolver {
                         resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
                             buffer: &colour,
                             offset: 0,
-                            size: wgpu::BufferSize::new(16),
+                            size: wgpu::BufferSize::new(range_size as u64),
                         }),
                     },
                 ],
@@ -644,6 +709,7 @@ impl GpuSolver {
                 staging,
                 bind_group,
                 colours,
+                grids,
                 colour_stride: stride,
                 particles: n as u32,
                 springs_len: order.len() as u32,
@@ -662,10 +728,13 @@ impl GpuSolver {
         if self.h == h as f32 {
             return Ok(());
         }
+        let springs = packed.colouring.springs.len();
         for (c, &k) in self.host_coefs.iter_mut().zip(&packed.colouring.springs) {
             c.p = lin[k as usize].p as f32;
             c.q = lin[k as usize].q as f32;
         }
+        self.host_coefs.truncate(springs);
+        self.host_coefs.extend(grid_coefs(packed, h));
         let q = &self.ctx.queue;
         q.write_buffer(&b.coefs, 0, bytemuck::cast_slice(&self.host_coefs));
         // h is the 4th f32 of Params.
@@ -736,6 +805,15 @@ impl GpuSolver {
                         Kernel::Jacobi => {
                             pass.set_pipeline(&p.spring_pass);
                             dispatch(&mut pass, b.springs_len);
+                            if !b.grids.is_empty() {
+                                pass.set_pipeline(&p.grid_pass);
+                                for (g, &(_, count)) in b.grids.iter().enumerate() {
+                                    let at = (b.colours.len() + g) as u32 * b.colour_stride;
+                                    pass.set_bind_group(0, &b.bind_group, &[at]);
+                                    dispatch(&mut pass, count);
+                                }
+                                pass.set_bind_group(0, &b.bind_group, &[0]);
+                            }
                             pass.set_pipeline(&p.particle_pass);
                             dispatch(&mut pass, b.particles);
                         }
@@ -827,6 +905,12 @@ impl GpuSolver {
         if let Some(b) = &self.buffers {
             let bytes = poison(b.springs_len as usize * 16);
             self.ctx.queue.write_buffer(&b.sdv, 0, &bytes);
+            // And the grid particles' sums (the other particles' stay zero: no pass writes them).
+            for &(first, count) in &b.grids {
+                let at = (u64::from(b.springs_len) + u64::from(first)) * 16;
+                let bytes = poison(count as usize * 16);
+                self.ctx.queue.write_buffer(&b.sdv, at, &bytes);
+            }
         }
     }
 
@@ -844,7 +928,11 @@ impl GpuSolver {
                 // Particle pass: offsets, entries, sdv reads, position and velocity in and out.
                 let spring_pass = m * (8 + 16 + 16) + n * (pos + if rate { 16 } else { 0 });
                 let particle_pass = n * (4 + 2 * pos + 2 * 16) + 2 * m * (8 + 16);
-                spring_pass + particle_pass
+                // Grid pass: each grid particle's position and velocity read (its neighbours'
+                // from cache), its sum written, then read by the particle pass.
+                let g: u64 = b.grids.iter().map(|&(_, c)| u64::from(c)).sum();
+                let grid_pass = g * (pos + 16 + 16 + 16);
+                spring_pass + grid_pass + particle_pass
             }
             Kernel::GaussSeidel { sweeps } => {
                 let sweep = m * (8 + 16) + n * (pos + 2 * 16);
@@ -902,16 +990,35 @@ fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     }
 }
 
-/// The device form of the state: compensated positions, and velocities whose `w` is 1 for a
-/// free particle and 0 for a pinned one (the shader's pin mask).
+/// The device form of the state: compensated positions, and velocities whose `w` is the
+/// inverse mass, 0 only for a pinned particle (the shader's pin mask; a free particle's is
+/// kept within f32's normal range, so it never reads as pinned).
 fn fill_state(packed: &Packed, pos: &mut Vec<Position>, vel: &mut Vec<[f32; 4]>) {
     pos.clear();
     pos.extend(packed.x.iter().map(|&x| Position::from_f64(x)));
     vel.clear();
     vel.extend(packed.v.iter().zip(&packed.inv_mass).map(|(v, &im)| {
         let v = v.as_vec3();
-        [v.x, v.y, v.z, if im == 0.0 { 0.0 } else { 1.0 }]
+        let w = if im == 0.0 {
+            0.0
+        } else {
+            (im as f32).clamp(f32::MIN_POSITIVE, f32::MAX)
+        };
+        [v.x, v.y, v.z, w]
     }));
+}
+
+/// The grids' link coefficients for step `h`, in device order (after the springs').
+fn grid_coefs(packed: &Packed, h: f64) -> impl Iterator<Item = Coef> + '_ {
+    packed.grids.iter().flat_map(|g| &g.links).map(move |l| {
+        let c = grid::link_coefficients(l, h);
+        Coef {
+            rest: l.rest_length as f32,
+            p: c.p as f32,
+            q: c.q as f32,
+            wa: 0.0,
+        }
+    })
 }
 
 /// `len` bytes of f32 NaN.

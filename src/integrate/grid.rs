@@ -17,6 +17,7 @@ use rayon::prelude::*;
 use super::harmonic::{self, Linear};
 use super::{axial, euler_move, par, Update};
 use crate::buffers::{Incidence, Packed, PackedGrid};
+use crate::components::GridLink;
 
 /// Old `(x, v)` of a particle.
 type State = (DVec3, DVec3);
@@ -45,6 +46,12 @@ struct Row<'a> {
     meta: &'a [(usize, bool, bool, usize)],
 }
 
+/// A link's Euler coefficients for step `h` (p = −κ h, q = −c h), in force form (μ = 1): the
+/// particle's own 1/m scales the result. The GPU's `grid_pass` takes the same.
+pub(crate) fn link_coefficients(l: &GridLink, h: f64) -> Linear {
+    harmonic::euler(l.stiffness, 0.5 * l.damping, h)
+}
+
 /// Per grid: the links' coefficients for the prepared step, and the bands.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct GridPass {
@@ -56,12 +63,7 @@ impl GridPass {
     pub(crate) fn prepare(&mut self, packed: &Packed, h: f64, bands: usize) {
         self.grids.clear();
         for g in &packed.grids {
-            // Force form (μ = 1): the particle's own 1/m scales the result.
-            let lin = g
-                .links
-                .iter()
-                .map(|l| harmonic::euler(l.stiffness, 0.5 * l.damping, h))
-                .collect();
+            let lin = g.links.iter().map(|l| link_coefficients(l, h)).collect();
             let (cols, rows, reach) = (g.cols as usize, g.rows as usize, g.reach());
             let count = if g.range().len() < par::PAR_MIN {
                 1

@@ -1,7 +1,7 @@
 #![doc = include_str!("MATH.md")]
 
 mod gauss_seidel;
-mod grid;
+pub(crate) mod grid;
 pub mod harmonic;
 pub mod implicit;
 pub mod paper;
