@@ -35,7 +35,7 @@ def oscillate(u, w, h, omega, zeta):
             e * (w * c - (omega * omega * u + zeta * omega * w) / wd * s))
 
 
-def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=False):
+def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=False, rho=0.0):
     """Coloured Gauss-Seidel over springs with the closed form, `sweeps` sweeps alternating
     direction. `displacement` adds the closed form's displacement D beyond free drift,
     accumulated over the sweeps (x += h v0 + sum D); otherwise x += h v_new.
@@ -44,12 +44,15 @@ def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=F
     - `iterated`: each sweep re-solves every spring from the start stretch and the stretch rate
       its neighbours' latest impulses give it (its own removed) and applies the difference to
       what it applied before: a fixed-point iteration toward a step in which every spring sees
-      the others' impulses, implicitly coupled."""
+      the others' impulses, implicitly coupled; with `rho` > 0 the sweeps are
+      Chebyshev-accelerated over the applied impulses for an assumed spectral radius `rho`."""
     inv = [0.0] + [1.0] * N
     v0, dx = v[:], [0.0] * (N + 1)
     applied = [(0.0, 0.0)] * N
+    prev, omega = applied[:], 1.0
     scale = 1 / sweeps if split else 1
     for k in range(sweeps):
+        before = applied[:]
         order = list(range(0, N, 2)) + list(range(1, N, 2))
         if k % 2 == 1:
             order.reverse()
@@ -67,6 +70,18 @@ def spring_sweeps(x, v, h, zeta, displacement, sweeps=1, split=False, iterated=F
                 dx[a] -= wa * (big_d - old_d)
                 dx[b] += (1 - wa) * (big_d - old_d)
             applied[a] = (phi, big_d)
+        if rho > 0 and k > 0:
+            omega = 2 / (2 - rho * rho) if k == 1 else 4 / (4 - rho * rho * omega)
+            applied = [tuple(omega * (n - o) + o for n, o in zip(applied[a], prev[a]))
+                       for a in range(N)]
+            v[:], dx = v0[:], [0.0] * (N + 1)
+            for a, (phi, big_d) in enumerate(applied):
+                wa = inv[a] / (inv[a] + inv[a + 1])
+                v[a] -= wa * phi
+                v[a + 1] += (1 - wa) * phi
+                dx[a] -= wa * big_d
+                dx[a + 1] += (1 - wa) * big_d
+        prev = before
     for i in range(1, N + 1):
         x[i] += h * (v0[i] if displacement else v[i]) + dx[i]
 
@@ -232,6 +247,10 @@ VARIANTS = {
     "spring SGS + exact displacement": lambda x, v, h, z: spring_sweeps(x, v, h, z, True, 2, split=True),
     "iterated spring GS, 2 sweeps": lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 2, iterated=True),
     "iterated spring GS, 4 sweeps": lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 4, iterated=True),
+    "iterated spring GS, 4 Chebyshev sweeps (rho = 0.5)":
+        lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 4, iterated=True, rho=0.5),
+    "iterated spring GS, 4 Chebyshev sweeps (rho = 0.9)":
+        lambda x, v, h, z: spring_sweeps(x, v, h, z, False, 4, iterated=True, rho=0.9),
     "iterated spring GS + exact displacement, 2 sweeps":
         lambda x, v, h, z: spring_sweeps(x, v, h, z, True, 2, iterated=True),
     "iterated spring GS + exact displacement, 4 sweeps":

@@ -582,7 +582,9 @@ impl GpuSolver {
                 coef: c as f32,
             })
             .collect();
-        let stride = self.ctx.limits.min_uniform_buffer_offset_alignment.max(16);
+        // Dynamic offsets must be multiples of the alignment, and a step must hold a Range.
+        let stride = (std::mem::size_of::<Range>() as u32)
+            .next_multiple_of(self.ctx.limits.min_uniform_buffer_offset_alignment.max(16));
         let mut colours: Vec<(u32, u32)> = (0..packed.colouring.colours())
             .map(|c| {
                 let o = &packed.colouring.offsets;
