@@ -292,6 +292,28 @@ fn cpu_against_gpu(
     Ok((worst, extent, travel))
 }
 
+/// Ten substeps a frame, each a tenth of the network's `h_c` (at least `omega`'s), less with
+/// damping ratio `zeta`: well inside every integrator's stable region (damping shrinks the
+/// explicit ones'). Explicit Euler, unstable on undamped springs at any h, a tenth of that
+/// again, so its growth over a run stays below 20 %.
+fn parity_config(world: &World, omega: f64, zeta: f64, integrator: Integrator) -> SimConfig {
+    let packed = harmonic::buffers::Packed::gather(world).expect("valid");
+    let omega = harmonic::step_control::network_frequency(&packed, 200).max(omega);
+    let mut h = 0.1 * std::f64::consts::PI / omega / (1.0 + zeta);
+    if integrator == Integrator::ExplicitEuler {
+        h /= 10.0;
+    }
+    SimConfig {
+        dt: 10.0 * h,
+        substeps: 10,
+        auto_substeps: false,
+        gravity: DVec3::new(0.0, -9.81, 0.0),
+        integrator,
+        exact_displacement: false,
+        backend: Backend::Cpu,
+    }
+}
+
 /// f32 against f64: each substep rounds positions to about ε₃₂·extent, and over a run those
 /// errors add up at worst linearly, so the bound is `4 ε₃₂ · extent · substeps` (≈ 2e-4 m for
 /// 300 substeps of a 3 m scene). Measured on lavapipe: ≤ 7e-6 m with damping, ≤ 6.6e-5 m
@@ -317,23 +339,7 @@ fn gpu_matches_cpu_on_random_scenes() {
         let (world_cpu, omega, zeta) =
             random_scene(&mut fastrand::Rng::with_seed(scene_seed), n, regime);
         let (world_gpu, ..) = random_scene(&mut fastrand::Rng::with_seed(scene_seed), n, regime);
-        // Well inside every integrator's stable region (damping shrinks the explicit ones').
-        let packed = harmonic::buffers::Packed::gather(&world_cpu).expect("valid");
-        let omega = harmonic::step_control::network_frequency(&packed, 200).max(omega);
-        let mut h = 0.1 * std::f64::consts::PI / omega / (1.0 + zeta);
-        if integrator == Integrator::ExplicitEuler {
-            // Unstable on undamped springs at any h: keep its growth over the run below 20 %.
-            h /= 10.0;
-        }
-        let config = SimConfig {
-            dt: 10.0 * h,
-            substeps: 10,
-            auto_substeps: false,
-            gravity: DVec3::new(0.0, -9.81, 0.0),
-            integrator,
-            exact_displacement: false,
-            backend: Backend::Cpu,
-        };
+        let config = parity_config(&world_cpu, omega, zeta, integrator);
         let (worst, extent, _) = cpu_against_gpu(world_cpu, world_gpu, config, 30)
             .unwrap_or_else(|e| panic!("seed {seed}, trial {trial} ({integrator}): {e}"));
         let tolerance = parity_tolerance(extent, 300);
@@ -422,26 +428,18 @@ fn cloth_grids_on_the_gpu_match_the_cpu_grid_pass() {
     for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
         for damping in [0.0, 0.02] {
             let probe = world(damping);
-            let packed = harmonic::buffers::Packed::gather(&probe).expect("valid");
-            let omega = harmonic::step_control::network_frequency(&packed, 200);
-            let mut h = 0.1 * std::f64::consts::PI / omega;
-            let mut frames = 30;
-            if integrator == Integrator::ExplicitEuler {
-                // Unstable on undamped springs at any h: keep its growth small.
-                h /= 10.0;
-                frames = 10;
-            }
-            let config = SimConfig {
-                dt: 10.0 * h,
-                substeps: 10,
-                auto_substeps: false,
-                gravity: DVec3::new(0.0, -9.81, 0.0),
-                integrator,
-                exact_displacement: false,
-                backend: Backend::Gpu,
+            let config = parity_config(&probe, 0.0, 0.0, integrator);
+            let frames = if integrator == Integrator::ExplicitEuler {
+                10
+            } else {
+                30
             };
             // The GPU really keeps the grids whole and specialises to them.
-            let mut gpu = Simulation::new(probe, config).expect("GPU simulation");
+            let on_gpu = SimConfig {
+                backend: Backend::Gpu,
+                ..config
+            };
+            let mut gpu = Simulation::new(probe, on_gpu).expect("GPU simulation");
             gpu.step().expect("step");
             assert_eq!(gpu.packed().grids.len(), 2);
             assert_eq!(gpu.packed().springs.len(), 3, "only the rope one by one");
