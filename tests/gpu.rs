@@ -613,7 +613,7 @@ fn specialisation_follows_the_scene() {
             .expect("uploaded")
     };
     let s = spec(text("symplectic-euler", 0.0, false));
-    assert!(!s.rate && !s.pins, "{s:?}");
+    assert!(!s.rate && !s.pins && !s.grids, "{s:?}");
     let s = spec(text("symplectic-euler", 1.0, true));
     assert!(s.rate && s.pins, "{s:?}");
     // The harmonic step responds to δ̇ even undamped (q = cos ωh − 1).
@@ -621,6 +621,18 @@ fn specialisation_follows_the_scene() {
     assert!(s.rate && !s.pins, "{s:?}");
     let s = spec(text("explicit-euler", 0.0, false));
     assert_eq!(s.update, 1);
+    // A cloth under symplectic Euler stays a grid on the device; under harmonic-gs it does not.
+    let cloth = |integrator: &str| {
+        let mut scene = harmonic::bench::hanging_cloth(8);
+        scene.integrator = Some(integrator.into());
+        scene.backend = Some("gpu".into());
+        let mut sim = Simulation::from_scene(&scene).expect("GPU");
+        let grids = sim.packed().grids.len();
+        let spec = sim.gpu_solver().expect("on the GPU").specialisation();
+        (grids, spec.expect("uploaded").grids)
+    };
+    assert_eq!(cloth("symplectic-euler"), (1, true));
+    assert_eq!(cloth("harmonic-gs"), (0, false));
 }
 
 /// The device contact stage against the CPU's (parry's projections and ray casts): random
