@@ -151,8 +151,8 @@ pub struct Specialisation {
 }
 
 impl Specialisation {
-    /// What a scene needs.
-    pub fn of(packed: &Packed, lin: &[Linear], integrator: Integrator) -> Self {
+    /// What a scene needs at step `h` (`lin`: its springs' coefficients for `h`).
+    pub fn of(packed: &Packed, lin: &[Linear], h: f64, integrator: Integrator) -> Self {
         let live = |k: &&u32| packed.springs[**k as usize].mu.is_finite();
         Self {
             rate: packed
@@ -165,8 +165,7 @@ impl Specialisation {
                     .grids
                     .iter()
                     .flat_map(|g| &g.links)
-                    // q = −c h (grid::link_coefficients)
-                    .any(|l| l.damping != 0.0),
+                    .any(|l| grid::link_coefficients(l, h).q != 0.0),
             pins: packed.inv_mass.contains(&0.0),
             update: u32::from(integrator == Integrator::ExplicitEuler),
             grids: !packed.grids.is_empty(),
@@ -527,7 +526,7 @@ impl GpuSolver {
                 what: format!("{integrator} does not step cloth grids kept whole"),
             });
         }
-        let mut spec = Specialisation::of(packed, lin, integrator);
+        let mut spec = Specialisation::of(packed, lin, h, integrator);
         if !self.specialise {
             spec = spec.general();
         }
@@ -602,8 +601,9 @@ impl GpuSolver {
                 ..Range::default()
             })
             .collect();
-        let mut links = 0;
+        let (mut links, mut grids) = (0, Vec::with_capacity(packed.grids.len()));
         for g in &packed.grids {
+            grids.push((g.base, g.cols * g.rows));
             ranges.push(Range {
                 start: g.base,
                 count: g.cols * g.rows,
@@ -614,11 +614,6 @@ impl GpuSolver {
             });
             links += g.links.len() as u32;
         }
-        let grids = packed
-            .grids
-            .iter()
-            .map(|g| (g.base, g.cols * g.rows))
-            .collect();
         let range_size = std::mem::size_of::<Range>();
         let mut colour_bytes = vec![0u8; ranges.len() * stride as usize];
         for (c, r) in ranges.iter().enumerate() {
