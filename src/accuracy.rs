@@ -137,6 +137,8 @@ pub struct Row {
     pub static_strain: f64,
     pub energy_drift: f64,
     pub stable: bool,
+    /// Found by bisecting toward the cheapest step within the default rule, not a ladder step.
+    pub edge: bool,
 }
 
 /// Positions at `T` after `steps` steps; `None` if it blew up. Also max strain and energy drift.
@@ -190,6 +192,55 @@ fn time_runs(packed: &Packed, integrator: Integrator, g: DVec3, steps: u64, repe
         .collect();
     samples.sort_by(f64::total_cmp);
     samples[samples.len() / 2]
+}
+
+/// What one scene's runs share.
+struct Runner<'a> {
+    scene: &'static str,
+    packed: &'a Packed,
+    /// The form the simulation steps a cloth in, for the integrators with a grid pass.
+    grid: &'a Packed,
+    g: DVec3,
+    /// Energy scale of the drift column.
+    e_ref: f64,
+    reference: &'a [DVec3],
+    hc: f64,
+    static_strain: f64,
+    repeats: u32,
+}
+
+impl Runner<'_> {
+    /// One run at `steps` per simulated second; timed by bare repeats when `timed` and stable.
+    fn run(&self, integrator: Integrator, steps: u64, timed: bool) -> Row {
+        let on = if integrator.runs_on_grids() {
+            self.grid
+        } else {
+            self.packed
+        };
+        let outcome = simulate(on, integrator, self.g, steps, self.e_ref);
+        let wall = if timed && outcome.is_some() {
+            time_runs(on, integrator, self.g, steps, self.repeats)
+        } else {
+            f64::NAN
+        };
+        let (rms_error, max_strain, energy_drift, stable) = match outcome {
+            Some((x, s, e)) => (rms(&x, self.reference), s, e, true),
+            None => (f64::NAN, f64::NAN, f64::NAN, false),
+        };
+        Row {
+            scene: self.scene,
+            integrator: integrator.name().to_string(),
+            steps,
+            step_ratio: T / steps as f64 / self.hc,
+            wall,
+            rms_error,
+            max_strain,
+            static_strain: self.static_strain,
+            energy_drift,
+            stable,
+            edge: false,
+        }
+    }
 }
 
 /// RMS distance between two position sets of equal length.
@@ -277,7 +328,7 @@ pub fn measure(
     } else {
         0
     };
-    let total = plan.len() + cases.len() + peer_runs;
+    let mut total = plan.len() + cases.len() + peer_runs;
     let mut done = 0;
     let mut rows = Vec::new();
     let mut refs = Vec::new();
@@ -316,46 +367,77 @@ pub fn measure(
             * g.length()
             * 1.0;
         let hc = stability::h_crit(&packed);
+        let runner = Runner {
+            scene: case.name,
+            packed: &packed,
+            grid: &grid,
+            g,
+            e_ref,
+            reference: &reference,
+            hc,
+            static_strain,
+            repeats: if packed.spring_count() > LARGE {
+                1
+            } else {
+                repeats
+            },
+        };
         for &(_, integrator, steps) in plan.iter().filter(|r| r.0 == ci) {
             progress(
                 done,
                 total,
                 &format!("{}: {integrator} at {steps} steps/s", case.name),
             );
-            let run_on = if integrator.runs_on_grids() {
-                &grid
-            } else {
-                &packed
-            };
-            let outcome = simulate(run_on, integrator, g, steps, e_ref);
-            let reps = if packed.spring_count() > LARGE {
-                1
-            } else {
-                repeats
-            };
-            let wall = if outcome.is_some() {
-                time_runs(run_on, integrator, g, steps, reps)
-            } else {
-                f64::NAN
-            };
-            let (rms_error, max_strain, energy_drift, stable) = match outcome {
-                Some((x, s, e)) => (rms(&x, &reference), s, e, true),
-                None => (f64::NAN, f64::NAN, f64::NAN, false),
-            };
-            rows.push(Row {
-                scene: case.name,
-                integrator: integrator.name().to_string(),
-                steps,
-                step_ratio: T / steps as f64 / hc,
-                wall,
-                rms_error,
-                max_strain,
-                static_strain,
-                energy_drift,
-                stable,
-            });
+            rows.push(runner.run(integrator, steps, true));
             done += 1;
         }
+        for integrator in CONTENDERS {
+            let ladder: Vec<&Row> = rows
+                .iter()
+                .filter(|r| r.scene == case.name && r.integrator == integrator.name())
+                .collect();
+            let Some((mut lo, mut hi)) = edge_bracket(&ladder, max_strain) else {
+                continue;
+            };
+            total += EDGE_BISECTIONS as usize + 1;
+            let mut best = None;
+            for _ in 0..EDGE_BISECTIONS {
+                let mid = ((lo as f64 * hi as f64).sqrt().round() as u64).clamp(lo + 1, hi - 1);
+                progress(
+                    done,
+                    total,
+                    &format!("{}: {integrator} edge, {mid} steps/s", case.name),
+                );
+                done += 1;
+                let probe = runner.run(integrator, mid, false);
+                if within_rule(&probe, max_strain, RULE_ERROR, RULE_STRAIN) {
+                    hi = mid;
+                    best = Some(mid);
+                } else {
+                    lo = mid;
+                }
+                if hi - lo < 2 {
+                    break;
+                }
+            }
+            progress(
+                done,
+                total,
+                &format!("{}: {integrator} edge, timing", case.name),
+            );
+            done += 1;
+            if let Some(steps) = best {
+                let mut row = runner.run(integrator, steps, true);
+                row.edge = true;
+                rows.push(row);
+            }
+        }
+        // Each edge row next to its integrator's ladder, in step order.
+        let first = rows.iter().position(|r| r.scene == case.name).unwrap_or(0);
+        rows[first..].sort_by_key(|r| {
+            let k = CONTENDERS.iter().position(|i| i.name() == r.integrator);
+            (k, r.steps)
+        });
         #[cfg(feature = "rapier")]
         if let Some(cloth) = case.scene.cloths.first() {
             for substeps in RAPIER_SUBSTEPS {
@@ -403,6 +485,7 @@ pub fn measure(
                         static_strain,
                         energy_drift: f64::NAN,
                         stable,
+                        edge: false,
                     });
                 }
             }
@@ -413,11 +496,11 @@ pub fn measure(
 }
 
 pub fn csv(rows: &[Row]) -> String {
-    let mut out = String::from("scene,integrator,steps_per_s,h_over_hc,wall_s_per_sim_s,rms_error_m,max_strain,static_strain,energy_drift,stable\n");
+    let mut out = String::from("scene,integrator,steps_per_s,h_over_hc,wall_s_per_sim_s,rms_error_m,max_strain,static_strain,energy_drift,stable,edge\n");
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{}",
             r.scene,
             r.integrator,
             r.steps,
@@ -427,14 +510,22 @@ pub fn csv(rows: &[Row]) -> String {
             r.max_strain,
             r.static_strain,
             r.energy_drift,
-            r.stable
+            r.stable,
+            r.edge
         );
     }
     out
 }
 
-/// The fastest stable row of a scene within `max_error` (m) RMS and `max_strain_error`
-/// (absolute, e.g. 0.01 = 1 percentage point) of the reference's max strain.
+/// Whether a run is stable, within `max_error` (m) RMS and within `max_strain_error` (absolute,
+/// e.g. 0.01 = 1 percentage point) of the reference's max strain.
+pub fn within_rule(r: &Row, reference_strain: f64, max_error: f64, max_strain_error: f64) -> bool {
+    r.stable
+        && r.rms_error <= max_error
+        && (r.max_strain - reference_strain).abs() <= max_strain_error
+}
+
+/// The fastest row of a scene within the rule (see [`within_rule`]).
 pub fn fastest_within<'a>(
     rows: &'a [Row],
     scene: &str,
@@ -444,12 +535,27 @@ pub fn fastest_within<'a>(
 ) -> Option<&'a Row> {
     rows.iter()
         .filter(|r| {
-            r.scene == scene
-                && r.stable
-                && r.rms_error <= max_error
-                && (r.max_strain - reference_strain).abs() <= max_strain_error
+            r.scene == scene && within_rule(r, reference_strain, max_error, max_strain_error)
         })
         .min_by(|a, b| a.wall.total_cmp(&b.wall))
+}
+
+/// Bisections between the ladder's cheapest step within the rule and the next cheaper step
+/// tried: four halve a factor of 2 to 2^(1/16), so the edge is placed within 4.4 %.
+pub const EDGE_BISECTIONS: u32 = 4;
+
+/// The steps per second that bracket an integrator's edge of the default rule on its ladder:
+/// the most steps that fell outside and the fewest that fell inside, when both were tried and
+/// the outside run is the cheaper one.
+pub fn edge_bracket(ladder: &[&Row], reference_strain: f64) -> Option<(u64, u64)> {
+    let inside = |r: &Row| within_rule(r, reference_strain, RULE_ERROR, RULE_STRAIN);
+    let hi = ladder.iter().filter(|r| inside(r)).map(|r| r.steps).min()?;
+    let lo = ladder
+        .iter()
+        .filter(|r| !inside(r) && r.steps < hi)
+        .map(|r| r.steps)
+        .max()?;
+    (hi - lo >= 2).then_some((lo, hi))
 }
 
 /// The default-integrator rule: error ≤ 1 cm RMS and max strain within 1 percentage point.
@@ -495,6 +601,7 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
                 );
             }
         }
+        frontier(&mut out, rows, scene, reference.max_strain);
         let _ = writeln!(out, "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | static strain | energy drift | stable |");
         let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|");
         for r in rows.iter().filter(|r| r.scene == scene) {
@@ -503,7 +610,7 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
                     out,
                     "| {} | {} | {:.3} | {:.4} | {:.3e} | {:.4} | {:.4} | {:+.2e} | yes |",
                     r.integrator,
-                    r.steps,
+                    steps_cell(r),
                     r.step_ratio,
                     r.wall,
                     r.rms_error,
@@ -515,13 +622,82 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
                 let _ = writeln!(
                     out,
                     "| {} | {} | {:.3} | - | - | - | {:.4} | - | no |",
-                    r.integrator, r.steps, r.step_ratio, r.static_strain
+                    r.integrator,
+                    steps_cell(r),
+                    r.step_ratio,
+                    r.static_strain
                 );
             }
         }
         let _ = writeln!(out);
     }
     out
+}
+
+/// The integrators of some rows, each once, in order of first appearance.
+fn integrators_in<'a>(rows: impl Iterator<Item = &'a Row>) -> Vec<&'a str> {
+    let mut names: Vec<&str> = Vec::new();
+    for r in rows {
+        if !names.contains(&r.integrator.as_str()) {
+            names.push(&r.integrator);
+        }
+    }
+    names
+}
+
+/// A ladder step as is; a bisected one marked.
+fn steps_cell(r: &Row) -> String {
+    if r.edge {
+        format!("{} (edge)", r.steps)
+    } else {
+        r.steps.to_string()
+    }
+}
+
+/// Each integrator's cheapest run within the default rule, and its wall time over symplectic
+/// Euler's: the speed ratio at equal error.
+fn frontier(out: &mut String, rows: &[Row], scene: &str, reference_strain: f64) {
+    let names = integrators_in(rows.iter().filter(|r| r.scene == scene));
+    let best = |name: &str| {
+        rows.iter()
+            .filter(|r| {
+                r.scene == scene
+                    && r.integrator == name
+                    && within_rule(r, reference_strain, RULE_ERROR, RULE_STRAIN)
+            })
+            .min_by(|a, b| a.wall.total_cmp(&b.wall))
+    };
+    let euler = best(Integrator::SymplecticEuler.name());
+    let _ = writeln!(
+        out,
+        "Each integrator's cheapest run within the rule (an edge row is bisected between the ladder's steps to within {:.1} %):\n",
+        100.0 * (2f64.powf(1.0 / f64::from(1u32 << EDGE_BISECTIONS)) - 1.0)
+    );
+    let _ = writeln!(
+        out,
+        "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | time ÷ symplectic Euler's |"
+    );
+    let _ = writeln!(out, "|---|---|---|---|---|---|---|");
+    for name in names {
+        match best(name) {
+            Some(r) => {
+                let ratio = euler.map_or("-".to_string(), |e| format!("{:.2}", r.wall / e.wall));
+                let _ = writeln!(
+                    out,
+                    "| {name} | {} | {:.3} | {:.4} | {:.3e} | {:.4} | {ratio} |",
+                    steps_cell(r),
+                    r.step_ratio,
+                    r.wall,
+                    r.rms_error,
+                    r.max_strain
+                );
+            }
+            None => {
+                let _ = writeln!(out, "| {name} | none within the rule | - | - | - | - | - |");
+            }
+        }
+    }
+    let _ = writeln!(out);
 }
 
 /// Log-log chart of wall time per simulated second against RMS error, one series per integrator,
@@ -598,15 +774,12 @@ pub fn chart(rows: &[Row], reference: &Reference, svg: &Path, png: &Path) -> Res
                 )))
                 .map_err(|e| e.to_string())?;
         }
-        let mut names: Vec<&str> = pts.iter().map(|r| r.integrator.as_str()).collect();
-        names.dedup();
+        let names = integrators_in(pts.iter().copied());
         for (k, name) in names.iter().enumerate() {
             let colour = Palette99::pick(k).to_rgba();
-            let series: Vec<(f64, f64)> = pts
-                .iter()
-                .filter(|r| r.integrator == *name)
-                .map(|r| (r.rms_error, r.wall))
-                .collect();
+            let mut runs: Vec<&&Row> = pts.iter().filter(|r| r.integrator == *name).collect();
+            runs.sort_by_key(|r| r.steps);
+            let series: Vec<(f64, f64)> = runs.iter().map(|r| (r.rms_error, r.wall)).collect();
             chart
                 .draw_series(LineSeries::new(series.clone(), colour.stroke_width(2)))
                 .map_err(|e| e.to_string())?
@@ -643,4 +816,45 @@ pub fn chart(rows: &[Row], reference: &Reference, svg: &Path, png: &Path) -> Res
         range,
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(steps: u64, stable: bool, rms_error: f64, max_strain: f64) -> Row {
+        Row {
+            scene: "s",
+            integrator: "i".into(),
+            steps,
+            step_ratio: 1.0,
+            wall: 1.0 / steps as f64,
+            rms_error,
+            max_strain,
+            static_strain: 0.0,
+            energy_drift: 0.0,
+            stable,
+            edge: false,
+        }
+    }
+
+    #[test]
+    fn the_edge_is_bracketed_by_the_cheapest_run_inside_and_the_next_cheaper_one() {
+        let ladder = [
+            row(100, false, f64::NAN, f64::NAN),
+            row(200, true, 0.02, 0.5),
+            row(400, true, 0.005, 0.5),
+            row(800, true, 0.001, 0.5),
+        ];
+        let refs: Vec<&Row> = ladder.iter().collect();
+        assert_eq!(edge_bracket(&refs, 0.5), Some((200, 400)));
+        // A reference strain 2 points away puts every run outside.
+        assert_eq!(edge_bracket(&refs, 0.52), None);
+        // Everything inside from the cheapest rung: nothing to bisect.
+        assert_eq!(edge_bracket(&refs[2..], 0.5), None);
+        // Neighbouring step counts leave no step between them.
+        let close = [row(10, false, f64::NAN, f64::NAN), row(11, true, 0.0, 0.5)];
+        let refs: Vec<&Row> = close.iter().collect();
+        assert_eq!(edge_bracket(&refs, 0.5), None);
+    }
 }
