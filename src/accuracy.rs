@@ -209,6 +209,16 @@ struct Runner<'a> {
 }
 
 impl Runner<'_> {
+    /// Times a stable run by `repeats` bare runs.
+    fn time(&self, row: &mut Row, integrator: Integrator, repeats: u32) {
+        let on = if integrator.runs_on_grids() {
+            self.grid
+        } else {
+            self.packed
+        };
+        row.wall = time_runs(on, integrator, self.g, row.steps, repeats);
+    }
+
     /// One run at `steps` per simulated second; timed by `repeats` bare runs (none: untimed)
     /// when stable.
     fn run(&self, integrator: Integrator, steps: u64, repeats: u32) -> Row {
@@ -218,28 +228,27 @@ impl Runner<'_> {
             self.packed
         };
         let outcome = simulate(on, integrator, self.g, steps, self.e_ref);
-        let wall = if repeats > 0 && outcome.is_some() {
-            time_runs(on, integrator, self.g, steps, repeats)
-        } else {
-            f64::NAN
-        };
         let (rms_error, max_strain, energy_drift, stable) = match outcome {
             Some((x, s, e)) => (rms(&x, self.reference), s, e, true),
             None => (f64::NAN, f64::NAN, f64::NAN, false),
         };
-        Row {
+        let mut row = Row {
             scene: self.scene,
             integrator: integrator.name().to_string(),
             steps,
             step_ratio: T / steps as f64 / self.hc,
-            wall,
+            wall: f64::NAN,
             rms_error,
             max_strain,
             static_strain: self.static_strain,
             energy_drift,
             stable,
             edge: false,
+        };
+        if repeats > 0 && stable {
+            self.time(&mut row, integrator, repeats);
         }
+        row
     }
 }
 
@@ -401,9 +410,15 @@ pub fn measure(
             let Some((mut lo, mut hi)) = edge_bracket(&ladder, max_strain) else {
                 continue;
             };
-            total += EDGE_BISECTIONS as usize + 1;
-            let mut best = None;
-            for _ in 0..EDGE_BISECTIONS {
+            let bisections = bisections_to_resolve(lo, hi);
+            total += bisections + 1;
+            let mut best: Option<Row> = None;
+            for k in 0..bisections {
+                if hi - lo < 2 {
+                    // No step count left between them: count the probes not run.
+                    done += bisections - k;
+                    break;
+                }
                 let mid = ((lo as f64 * hi as f64).sqrt().round() as u64).clamp(lo + 1, hi - 1);
                 progress(
                     done,
@@ -414,28 +429,28 @@ pub fn measure(
                 let probe = runner.run(integrator, mid, 0);
                 if within_rule(&probe, max_strain, RULE_ERROR, RULE_STRAIN) {
                     hi = mid;
-                    best = Some(mid);
+                    best = Some(probe);
                 } else {
                     lo = mid;
                 }
-                if hi - lo < 2 {
-                    break;
-                }
             }
-            progress(
-                done,
-                total,
-                &format!("{}: {integrator} edge, timing", case.name),
-            );
-            done += 1;
-            if let Some(steps) = best {
-                let mut row = runner.run(integrator, steps, repeats.max(1));
+            if let Some(mut row) = best {
+                progress(
+                    done,
+                    total,
+                    &format!("{}: {integrator} edge, timing", case.name),
+                );
+                runner.time(&mut row, integrator, repeats.max(1));
                 row.edge = true;
                 rows.push(row);
             }
+            done += 1;
         }
         // Each edge row next to its integrator's ladder, in step order.
-        let first = rows.iter().position(|r| r.scene == case.name).unwrap_or(0);
+        let first = rows
+            .iter()
+            .position(|r| r.scene == case.name)
+            .unwrap_or(rows.len());
         rows[first..].sort_by_key(|r| {
             let k = CONTENDERS.iter().position(|i| i.name() == r.integrator);
             (k, r.steps)
@@ -542,9 +557,16 @@ pub fn fastest_within<'a>(
         .min_by(|a, b| a.wall.total_cmp(&b.wall))
 }
 
-/// Bisections between the ladder's cheapest step within the rule and the next cheaper step
-/// tried: four halve a factor of 2 to 2^(1/16), so the edge is placed within 4.4 %.
-pub const EDGE_BISECTIONS: u32 = 4;
+/// How close the bisection places an integrator's edge of the rule: within a factor of
+/// 2^(1/16), 4.4 % (four bisections of the ladder's factor of 2).
+pub const EDGE_RESOLUTION: f64 = 1.044_273_782_427_413_8;
+
+/// Geometric bisections that narrow `hi / lo` to [`EDGE_RESOLUTION`].
+pub fn bisections_to_resolve(lo: u64, hi: u64) -> usize {
+    let halvings = ((hi as f64 / lo as f64).ln() / EDGE_RESOLUTION.ln()).log2();
+    // The tolerance keeps an exact factor of 2 at four bisections despite rounding.
+    (halvings - 1e-9).ceil().max(0.0) as usize
+}
 
 /// The steps per second that bracket an integrator's edge of the default rule on its ladder:
 /// the most steps that fell outside and the fewest that fell inside, when both were tried and
@@ -657,7 +679,7 @@ fn steps_cell(r: &Row) -> String {
 }
 
 /// Each integrator's cheapest run within the default rule, and its wall time over symplectic
-/// Euler's: the speed ratio at equal error.
+/// Euler's: a speed ratio between runs inside the same error bounds.
 fn frontier(out: &mut String, rows: &[Row], scene: &str, reference_strain: f64) {
     let names = integrators_in(rows.iter().filter(|r| r.scene == scene));
     let best = |name: &str| {
@@ -672,8 +694,8 @@ fn frontier(out: &mut String, rows: &[Row], scene: &str, reference_strain: f64) 
     let euler = best(Integrator::SymplecticEuler.name());
     let _ = writeln!(
         out,
-        "Each integrator's cheapest run within the rule (an edge row is bisected between the ladder's steps to within {:.1} %):\n",
-        100.0 * (2f64.powf(1.0 / f64::from(1u32 << EDGE_BISECTIONS)) - 1.0)
+        "Each integrator's cheapest run within the rule (an edge row is bisected between the ladder's steps to within {:.1} %, taking a finer step to stay inside):\n",
+        100.0 * (EDGE_RESOLUTION - 1.0)
     );
     let _ = writeln!(
         out,
@@ -858,5 +880,19 @@ mod tests {
         let close = [row(10, false, f64::NAN, f64::NAN), row(11, true, 0.0, 0.5)];
         let refs: Vec<&Row> = close.iter().collect();
         assert_eq!(edge_bracket(&refs, 0.5), None);
+    }
+
+    #[test]
+    fn bisections_narrow_a_bracket_to_the_resolution() {
+        assert_eq!(bisections_to_resolve(200, 400), 4);
+        assert_eq!(bisections_to_resolve(60, 240), 5);
+        for (lo, hi) in [(200u64, 400u64), (60, 240), (7646, 15292), (10, 11)] {
+            let n = bisections_to_resolve(lo, hi) as i32;
+            let left = (hi as f64 / lo as f64).powf(0.5f64.powi(n));
+            assert!(
+                left <= EDGE_RESOLUTION * (1.0 + 1e-12),
+                "{lo}..{hi}: {left}"
+            );
+        }
     }
 }
