@@ -209,25 +209,24 @@ struct Runner<'a> {
 }
 
 impl Runner<'_> {
-    /// Times a stable run by `repeats` bare runs.
-    fn time(&self, row: &mut Row, integrator: Integrator, repeats: u32) {
-        let on = if integrator.runs_on_grids() {
+    /// The buffers `integrator` runs on.
+    fn on(&self, integrator: Integrator) -> &Packed {
+        if integrator.runs_on_grids() {
             self.grid
         } else {
             self.packed
-        };
-        row.wall = time_runs(on, integrator, self.g, row.steps, repeats);
+        }
+    }
+
+    /// Times a stable run by `repeats` bare runs.
+    fn time(&self, row: &mut Row, integrator: Integrator, repeats: u32) {
+        row.wall = time_runs(self.on(integrator), integrator, self.g, row.steps, repeats);
     }
 
     /// One run at `steps` per simulated second; timed by `repeats` bare runs (none: untimed)
     /// when stable.
     fn run(&self, integrator: Integrator, steps: u64, repeats: u32) -> Row {
-        let on = if integrator.runs_on_grids() {
-            self.grid
-        } else {
-            self.packed
-        };
-        let outcome = simulate(on, integrator, self.g, steps, self.e_ref);
+        let outcome = simulate(self.on(integrator), integrator, self.g, steps, self.e_ref);
         let (rms_error, max_strain, energy_drift, stable) = match outcome {
             Some((x, s, e)) => (rms(&x, self.reference), s, e, true),
             None => (f64::NAN, f64::NAN, f64::NAN, false),
@@ -427,7 +426,7 @@ pub fn measure(
                 );
                 done += 1;
                 let probe = runner.run(integrator, mid, 0);
-                if within_rule(&probe, max_strain, RULE_ERROR, RULE_STRAIN) {
+                if within_rule(&probe, max_strain) {
                     hi = mid;
                     best = Some(probe);
                 } else {
@@ -534,26 +533,19 @@ pub fn csv(rows: &[Row]) -> String {
     out
 }
 
-/// Whether a run is stable, within `max_error` (m) RMS and within `max_strain_error` (absolute,
-/// e.g. 0.01 = 1 percentage point) of the reference's max strain.
-pub fn within_rule(r: &Row, reference_strain: f64, max_error: f64, max_strain_error: f64) -> bool {
-    r.stable
-        && r.rms_error <= max_error
-        && (r.max_strain - reference_strain).abs() <= max_strain_error
+/// Whether a run is inside the default rule: stable, within [`RULE_ERROR`] RMS and within
+/// [`RULE_STRAIN`] of the reference's max strain.
+pub fn within_rule(r: &Row, reference_strain: f64) -> bool {
+    r.stable && r.rms_error <= RULE_ERROR && (r.max_strain - reference_strain).abs() <= RULE_STRAIN
 }
 
-/// The fastest row of a scene within the rule (see [`within_rule`]).
+/// The fastest of some rows inside the default rule.
 pub fn fastest_within<'a>(
-    rows: &'a [Row],
-    scene: &str,
-    max_error: f64,
+    rows: impl IntoIterator<Item = &'a Row>,
     reference_strain: f64,
-    max_strain_error: f64,
 ) -> Option<&'a Row> {
-    rows.iter()
-        .filter(|r| {
-            r.scene == scene && within_rule(r, reference_strain, max_error, max_strain_error)
-        })
+    rows.into_iter()
+        .filter(|r| within_rule(r, reference_strain))
         .min_by(|a, b| a.wall.total_cmp(&b.wall))
 }
 
@@ -572,7 +564,7 @@ pub fn bisections_to_resolve(lo: u64, hi: u64) -> usize {
 /// the most steps that fell outside and the fewest that fell inside, when both were tried and
 /// the outside run is the cheaper one.
 pub fn edge_bracket(ladder: &[&Row], reference_strain: f64) -> Option<(u64, u64)> {
-    let inside = |r: &Row| within_rule(r, reference_strain, RULE_ERROR, RULE_STRAIN);
+    let inside = |r: &Row| within_rule(r, reference_strain);
     let hi = ladder.iter().filter(|r| inside(r)).map(|r| r.steps).min()?;
     let lo = ladder
         .iter()
@@ -610,7 +602,10 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
             "Baselines: never moving scores {:.3e} m RMS, the static equilibrium {:.3e} m.\n",
             reference.still, reference.settled
         );
-        match fastest_within(rows, scene, RULE_ERROR, reference.max_strain, RULE_STRAIN) {
+        match fastest_within(
+            rows.iter().filter(|r| r.scene == scene),
+            reference.max_strain,
+        ) {
             Some(r) => {
                 let _ = writeln!(
                     out,
@@ -683,13 +678,10 @@ fn steps_cell(r: &Row) -> String {
 fn frontier(out: &mut String, rows: &[Row], scene: &str, reference_strain: f64) {
     let names = integrators_in(rows.iter().filter(|r| r.scene == scene));
     let best = |name: &str| {
-        rows.iter()
-            .filter(|r| {
-                r.scene == scene
-                    && r.integrator == name
-                    && within_rule(r, reference_strain, RULE_ERROR, RULE_STRAIN)
-            })
-            .min_by(|a, b| a.wall.total_cmp(&b.wall))
+        let runs = rows
+            .iter()
+            .filter(|r| r.scene == scene && r.integrator == name);
+        fastest_within(runs, reference_strain)
     };
     let euler = best(Integrator::SymplecticEuler.name());
     let _ = writeln!(
