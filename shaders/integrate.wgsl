@@ -106,7 +106,7 @@ fn drift_by(i: u32, dx: vec3<f32>) {
 fn spring_response(e: vec2<u32>, c: Coef, va: vec3<f32>, vb: vec3<f32>) -> vec4<f32> {
     let d = separation(e.x, e.y);
     let len = length(d);
-    let n = d / len;
+    let n = d * (1.0 / len);
     let delta = len - c.rest;
     var phi = c.p * delta;
     if RATE {

@@ -487,7 +487,8 @@ impl Solver {
 pub(crate) fn axial(xa: DVec3, xb: DVec3, va: DVec3, vb: DVec3, rest: f64) -> (DVec3, f64, f64) {
     let d = xb - xa;
     let len = d.length();
-    let n = d / len;
+    // One division, not three (a large share of the grid pass's time).
+    let n = d * (1.0 / len);
     let delta = len - rest;
     let delta_dot = n.dot(vb - va);
     (n, delta, delta_dot)
