@@ -40,6 +40,22 @@ pub fn hanging_cloth(n: u32) -> Scene {
     }
 }
 
+/// `k` copies of [`hanging_cloth`] side by side, 1.5 m apart (many small cloths: capes, flags).
+pub fn hanging_cloths(n: u32, k: u32) -> Scene {
+    let mut scene = hanging_cloth(n);
+    let one = scene.cloths[0].clone();
+    scene.cloths = (0..k)
+        .map(|i| Cloth {
+            origin: [one.origin[0] + 1.5 * i as f64, one.origin[1], one.origin[2]],
+            ..one.clone()
+        })
+        .collect();
+    if k > 1 {
+        scene.name = Some(format!("{k} hanging cloths {n}×{n}"));
+    }
+    scene
+}
+
 /// One row of the bench.
 pub struct Row {
     pub integrator: Integrator,
@@ -55,11 +71,12 @@ pub struct Row {
 /// on the springs one by one too.
 pub fn measure(
     n: u32,
+    cloths: u32,
     substeps: u32,
     repeats: u32,
     integrators: &[Integrator],
 ) -> (usize, Vec<Row>) {
-    let scene = hanging_cloth(n);
+    let scene = hanging_cloths(n, cloths);
     let world = scene.build().world;
     let gather = |keep_grids| {
         let options = GatherOptions {
@@ -121,8 +138,14 @@ pub fn measure(
 }
 
 /// The bench as a Markdown table.
-pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -> String {
-    let (m, rows) = measure(n, substeps, repeats, integrators);
+pub fn report(
+    n: u32,
+    cloths: u32,
+    substeps: u32,
+    repeats: u32,
+    integrators: &[Integrator],
+) -> String {
+    let (m, rows) = measure(n, cloths, substeps, repeats, integrators);
     let threads = rayon::current_num_threads();
     let reference = rows
         .iter()
@@ -131,8 +154,8 @@ pub fn report(n: u32, substeps: u32, repeats: u32, integrators: &[Integrator]) -
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "cloth {n}×{n}: {} particles, {m} springs; {substeps} substeps × {repeats} repeats (median), {threads} threads\n",
-        n * n
+        "{cloths} cloth(s) {n}×{n}: {} particles, {m} springs; {substeps} substeps × {repeats} repeats (median), {threads} threads\n",
+        cloths * n * n
     );
     let _ = writeln!(
         out,

@@ -75,6 +75,9 @@ enum Command {
         /// Cloth resolution N (N×N particles).
         #[arg(long, default_value_t = 128)]
         size: u32,
+        /// Cloths of that size side by side (each a grid of its own).
+        #[arg(long, default_value_t = 1)]
+        cloths: u32,
         /// Substeps timed per integrator and repeat.
         #[arg(long, default_value_t = 200)]
         substeps: u32,
@@ -224,11 +227,12 @@ fn main() -> ExitCode {
         },
         Command::Throughput {
             size,
+            cloths,
             substeps,
             repeats,
             integrators,
         } => parse_integrators(&integrators).map(|list| {
-            print!("{}", bench::report(size, substeps, repeats, &list));
+            print!("{}", bench::report(size, cloths, substeps, repeats, &list));
         }),
         Command::DrapePeer { scene } => drape_peer(&scene),
         Command::Render(args) => render(args),

@@ -147,53 +147,122 @@ impl GridPass {
             incidence,
             ..
         } = packed;
-        for (grid, (lin, bands)) in grids.iter().zip(&mut self.grids) {
-            let range = grid.range();
-            let (x, v) = (&mut x[range.clone()], &mut v[range.clone()]);
-            let cols = grid.cols as usize;
-            let reach = grid.reach();
-            let rows = grid.rows as usize;
-            // The rows each band's neighbours will overwrite, copied first.
-            for b in bands.iter_mut() {
-                let copy = |dst: &mut [State], from: usize, to: usize, first: isize| {
-                    for r in from..to {
-                        let k = (r as isize - first) as usize * cols;
-                        for c in 0..cols {
-                            dst[k + c] = (x[r * cols + c], v[r * cols + c]);
-                        }
+        let (Some(first), Some(last)) = (grids.first(), grids.last()) else {
+            return;
+        };
+        let shared = Shared {
+            vector: self.vector,
+            inv_mass,
+            incidence,
+            sdv,
+            g,
+            h,
+            update,
+        };
+        // Grids hold disjoint, increasing packed ranges (gather checks it): many small cloths
+        // run side by side, each on one thread.
+        let span = first.range().start..last.range().end;
+        let total = grids.iter().map(|g| g.range().len()).sum::<usize>();
+        let (x, v) = (&mut x[span.clone()], &mut v[span.clone()]);
+        run_grids(
+            &shared,
+            grids,
+            &mut self.grids,
+            x,
+            v,
+            span.start,
+            total >= par::PAR_MIN,
+        );
+    }
+}
+
+/// What every grid of a pass shares.
+struct Shared<'a> {
+    vector: Vector,
+    /// Every particle's inverse mass.
+    inv_mass: &'a [f64],
+    incidence: &'a Incidence,
+    sdv: &'a [DVec3],
+    g: DVec3,
+    h: f64,
+    update: Update,
+}
+
+/// Steps `grids` (their state in `x`, `v`, which start at packed index `offset`): in two
+/// halves of about equal particle counts side by side when `parallel`, else one by one.
+fn run_grids(
+    shared: &Shared<'_>,
+    grids: &[PackedGrid],
+    work: &mut [(Vec<Linear>, Vec<Band>)],
+    x: &mut [DVec3],
+    v: &mut [DVec3],
+    offset: usize,
+    parallel: bool,
+) {
+    if parallel && grids.len() > 1 {
+        let half = grids.iter().map(|g| g.range().len()).sum::<usize>() / 2;
+        let mut seen = 0;
+        let mid = grids
+            .iter()
+            .position(|g| {
+                seen += g.range().len();
+                seen > half
+            })
+            .unwrap_or(0)
+            .clamp(1, grids.len() - 1);
+        let cut = grids[mid].range().start - offset;
+        let (gl, gr) = grids.split_at(mid);
+        let (wl, wr) = work.split_at_mut(mid);
+        let (xl, xr) = x.split_at_mut(cut);
+        let (vl, vr) = v.split_at_mut(cut);
+        rayon::join(
+            || run_grids(shared, gl, wl, xl, vl, offset, true),
+            || run_grids(shared, gr, wr, xr, vr, offset + cut, true),
+        );
+        return;
+    }
+    for (grid, (lin, bands)) in grids.iter().zip(work) {
+        let range = grid.range();
+        let local = range.start - offset..range.end - offset;
+        let (x, v) = (&mut x[local.clone()], &mut v[local]);
+        let cols = grid.cols as usize;
+        let reach = grid.reach();
+        let rows = grid.rows as usize;
+        // The rows each band's neighbours will overwrite, copied first.
+        for b in bands.iter_mut() {
+            let copy = |dst: &mut [State], from: usize, to: usize, first: isize| {
+                for r in from..to {
+                    let k = (r as isize - first) as usize * cols;
+                    for c in 0..cols {
+                        dst[k + c] = (x[r * cols + c], v[r * cols + c]);
                     }
-                };
-                let (r0, r1) = (b.rows.start, b.rows.end);
-                copy(
-                    &mut b.above,
-                    r0.saturating_sub(reach),
-                    r0,
-                    r0 as isize - reach as isize,
-                );
-                copy(&mut b.below, r1, (r1 + reach).min(rows), r1 as isize);
-            }
-            let per = bands[0].rows.len() * cols;
-            let ctx = Ctx {
-                vector: self.vector,
-                grid,
-                inv: &inv_mass[range],
-                lin,
-                incidence,
-                sdv,
-                g,
-                h,
-                update,
-                cols,
-                reach,
+                }
             };
-            if bands.len() == 1 {
-                ctx.band(&mut bands[0], x, v);
-            } else {
-                x.par_chunks_mut(per)
-                    .zip(v.par_chunks_mut(per))
-                    .zip(bands.par_iter_mut())
-                    .for_each(|((x, v), b)| ctx.band(b, x, v));
-            }
+            let (r0, r1) = (b.rows.start, b.rows.end);
+            copy(
+                &mut b.above,
+                r0.saturating_sub(reach),
+                r0,
+                r0 as isize - reach as isize,
+            );
+            copy(&mut b.below, r1, (r1 + reach).min(rows), r1 as isize);
+        }
+        let per = bands[0].rows.len() * cols;
+        let ctx = Ctx {
+            shared,
+            grid,
+            inv: &shared.inv_mass[range],
+            lin,
+            cols,
+            reach,
+        };
+        if bands.len() == 1 {
+            ctx.band(&mut bands[0], x, v);
+        } else {
+            x.par_chunks_mut(per)
+                .zip(v.par_chunks_mut(per))
+                .zip(bands.par_iter_mut())
+                .for_each(|((x, v), b)| ctx.band(b, x, v));
         }
     }
 }
@@ -231,16 +300,11 @@ impl Halo<'_> {
 
 /// What every band of one grid shares.
 struct Ctx<'a> {
-    vector: Vector,
+    shared: &'a Shared<'a>,
     grid: &'a PackedGrid,
     /// The grid's inverse masses.
     inv: &'a [f64],
     lin: &'a [Linear],
-    incidence: &'a Incidence,
-    sdv: &'a [DVec3],
-    g: DVec3,
-    h: f64,
-    update: Update,
     cols: usize,
     reach: usize,
 }
@@ -248,7 +312,7 @@ struct Ctx<'a> {
 impl Ctx<'_> {
     /// The band, compiled for the chosen vector unit.
     fn band(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
-        match self.vector {
+        match self.shared.vector {
             Vector::Portable => self.band_rows(b, x, v),
             // SAFETY: `Vector::available` found the feature on this CPU.
             #[cfg(target_arch = "x86_64")]
@@ -355,8 +419,16 @@ impl Ctx<'_> {
                     let i = a * cols + c;
                     if self.inv[i] != 0.0 {
                         let sum = DVec3::new(ring[0][s + c], ring[1][s + c], ring[2][s + c]);
-                        let dv = sum + self.incidence.sum(self.sdv, self.grid.base as usize + i);
-                        (x[k], v[k]) = euler_move(self.update, x[k], v[k], dv, self.g, self.h);
+                        let Shared {
+                            incidence,
+                            sdv,
+                            g,
+                            h,
+                            update,
+                            ..
+                        } = *self.shared;
+                        let dv = sum + incidence.sum(sdv, self.grid.base as usize + i);
+                        (x[k], v[k]) = euler_move(update, x[k], v[k], dv, g, h);
                     }
                 }
             }
