@@ -83,8 +83,28 @@ impl Vector {
         v
     }
 
-    fn widest() -> Self {
-        Self::available().pop().unwrap_or_default()
+    /// The widest this CPU runs, or the level `HARMONIC_SIMD` names (`portable`, `avx2`,
+    /// `avx512`) when the CPU runs it: to measure what each level buys.
+    fn chosen() -> Self {
+        let mut levels = Self::available();
+        let named = std::env::var("HARMONIC_SIMD").ok();
+        if let Some(k) = levels
+            .iter()
+            .position(|l| named.as_deref() == Some(l.name()))
+        {
+            return levels[k];
+        }
+        levels.pop().unwrap_or_default()
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Portable => "portable",
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx2 => "avx2",
+            #[cfg(target_arch = "x86_64")]
+            Self::Avx512 => "avx512",
+        }
     }
 }
 
@@ -103,7 +123,7 @@ impl GridPass {
     /// Coefficients for step `h` and scratch for `packed`'s grids (`bands` per large grid).
     pub(crate) fn prepare(&mut self, packed: &Packed, h: f64, bands: usize) {
         self.grids.clear();
-        self.vector = Vector::widest();
+        self.vector = Vector::chosen();
         for g in &packed.grids {
             let lin = g.links.iter().map(|l| link_coefficients(l, h)).collect();
             let (cols, rows, reach) = (g.cols as usize, g.rows as usize, g.reach());
