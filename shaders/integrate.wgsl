@@ -153,7 +153,7 @@ fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
     sdv[k] = vec4<f32>(guard(r.w * r.xyz, e, va, vb), 0.0);
 }
 
-// Mirrors grid::Ctx::anchor_row for one grid: each particle sums −φ n / m over the links that
+// The GPU form of grid::Ctx::band_rows for one grid: each particle sums −φ n / m over the links that
 // reach it, from either end (each spring is evaluated at both its ends, with n pointing away
 // from the particle), into sdv[params.springs + i] for particle_pass.
 @compute @workgroup_size(WORKGROUP)

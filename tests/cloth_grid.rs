@@ -10,8 +10,9 @@ use harmonic::prelude::*;
 use harmonic::{ClothGrid, ClothSprings, GridLink, SceneIndex, SimError};
 use hecs::{Entity, World};
 
-fn cloth(n: u32, integrator: Integrator) -> Scene {
-    let mut scene = harmonic::bench::hanging_cloth(n);
+fn cloth((cols, rows): (u32, u32), integrator: Integrator) -> Scene {
+    let mut scene = harmonic::bench::hanging_cloth(cols);
+    scene.cloths[0].resolution = (cols, rows);
     scene.dt = 1e-3;
     scene.substeps = Some(4);
     scene.integrator = Some(integrator.name().into());
@@ -62,8 +63,9 @@ fn springs_one_by_one(mut world: World) -> World {
 
 #[test]
 fn the_grid_pass_matches_the_springs_one_by_one() {
-    // 24×24 runs on the calling thread in one band; 72×72 in bands on rayon's pool.
-    for n in [24, 72] {
+    // 24×24 runs on the calling thread in one band; 72×72 in bands on rayon's pool; rows of 5
+    // and 9 (shorter than the pass's chunks of 8, and one over) in bands too.
+    for n in [(24, 24), (72, 72), (5, 900), (9, 500)] {
         for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
             let mut scene = cloth(n, integrator);
             // Explicit Euler grows every mode at any step (and the rounding difference with
@@ -102,11 +104,11 @@ fn the_grid_pass_matches_the_springs_one_by_one() {
             assert!(a.iter().all(|x| x.is_finite()));
             assert!(
                 moved > 1e-4,
-                "{integrator} {n}: the cloth must move ({moved:e})"
+                "{integrator} {n:?}: the cloth must move ({moved:e})"
             );
             assert!(
                 worst < 1e-10,
-                "{integrator} {n}×{n}: grid and single springs differ by {worst:e}"
+                "{integrator} {n:?}: grid and single springs differ by {worst:e}"
             );
         }
     }
@@ -114,7 +116,7 @@ fn the_grid_pass_matches_the_springs_one_by_one() {
 
 #[test]
 fn a_grid_that_no_longer_matches_its_particles_is_a_located_error() {
-    let mut sim = Simulation::from_scene(&cloth(8, Integrator::SymplecticEuler)).unwrap();
+    let mut sim = Simulation::from_scene(&cloth((8, 8), Integrator::SymplecticEuler)).unwrap();
     sim.step().unwrap();
     let grid = sim.packed().grids[0].entity;
     // A particle of the cloth despawned: its scene index is missing.
@@ -220,7 +222,7 @@ fn a_grid_that_no_longer_matches_its_particles_is_a_located_error() {
 
 #[test]
 fn other_integrators_get_the_grid_expanded() {
-    let mut sim = Simulation::from_scene(&cloth(16, Integrator::SymplecticEuler)).unwrap();
+    let mut sim = Simulation::from_scene(&cloth((16, 16), Integrator::SymplecticEuler)).unwrap();
     let springs = sim.packed().spring_count();
     assert!(sim.packed().springs.is_empty());
     let mut c = *sim.config();
@@ -239,7 +241,7 @@ fn other_integrators_get_the_grid_expanded() {
 
 #[test]
 fn a_link_offset_that_cannot_be_reversed_is_refused() {
-    let mut sim = Simulation::from_scene(&cloth(4, Integrator::SymplecticEuler)).unwrap();
+    let mut sim = Simulation::from_scene(&cloth((4, 4), Integrator::SymplecticEuler)).unwrap();
     let grid = sim.packed().grids[0].entity;
     sim.world_mut()
         .get::<&mut ClothSprings>(grid)

@@ -387,7 +387,7 @@ impl Ctx<'_> {
             s.fill(0.0);
         }
         for a in first..r1 {
-            // The slots of row a − 1, complete and moved, now take row a + reach.
+            // The slots of row a − 1, complete (and moved, if the band's), now take row a + reach.
             if a > first {
                 let s = slot(a + reach);
                 for k in ring.iter_mut() {
@@ -404,10 +404,8 @@ impl Ctx<'_> {
                 if rb >= rows || !(own || in_band) {
                     continue;
                 }
-                // Columns whose other end exists: c in lo..hi, the other end at c + dc.
                 let dc = link.offset.0 as isize;
-                let lo = (-dc).max(0) as usize;
-                let hi = (cols as isize - dc.max(0)) as usize;
+                let Range { start: lo, end: hi } = columns(cols, dc);
                 if lo >= hi {
                     continue;
                 }
@@ -456,8 +454,17 @@ impl Ctx<'_> {
     }
 }
 
+/// The columns `c` of a row whose link `dc` has its other end, `c + dc`, in the grid (empty
+/// for a link longer than the grid is wide).
+fn columns(cols: usize, dc: isize) -> Range<usize> {
+    let lo = (-dc).clamp(0, cols as isize) as usize;
+    let hi = (cols as isize - dc.max(0)).max(0) as usize;
+    lo..hi.max(lo)
+}
+
 /// Width of the row loops' chunks: 8 f64 fill an AVX-512 register (two AVX2, four SSE2). A
-/// row's last chunk is padded, so a short row (a 16-column cloth) still runs vectorised.
+/// row's last partial chunk is its last 8 elements again, so a 16-column cloth runs vectorised
+/// throughout; only rows under 8 long are padded.
 const L: usize = 8;
 type Lane = [f64; L];
 
@@ -590,51 +597,75 @@ mod tests {
     use super::*;
     use crate::buffers::GatherOptions;
 
-    /// Every vector level steps a cloth to the same bits: 70 columns (whole chunks, an
-    /// overlapping last chunk, links a column or two shorter) in three bands (halo rows; the
-    /// grid is over `par::PAR_MIN` particles).
+    #[test]
+    fn a_links_columns_are_those_with_both_ends_in_the_grid() {
+        for (cols, dc, want) in [
+            (16, 0, 0..16),
+            (16, 2, 0..14),
+            (16, -1, 1..16),
+            (16, 16, 0..0),
+            (1, 2, 0..0),
+            (2, -3, 2..2),
+            (3, -2, 2..3),
+        ] {
+            let got = columns(cols, dc);
+            assert_eq!(got, want, "{cols} columns, dc {dc}");
+            // Independently: the c whose c + dc is a column.
+            let brute: Vec<usize> = (0..cols)
+                .filter(|&c| (0..cols as isize).contains(&(c as isize + dc)))
+                .collect();
+            assert_eq!(got.clone().collect::<Vec<_>>(), brute);
+        }
+    }
+
+    /// Every vector level steps a cloth to the same bits, in three bands (halo rows; every
+    /// grid is over `par::PAR_MIN` particles): rows of 70 (whole chunks and an overlapping last
+    /// one), 16 (exact chunks for some links), 9 (one chunk and an overlap of 7) and 5 (padded).
     #[test]
     fn every_vector_unit_gives_the_same_bits() {
-        let built = crate::bench::hanging_cloth(70).build();
-        let options = GatherOptions {
-            keep_grids: true,
-            colouring: false,
-        };
-        let mut start = Packed::gather_with(&built.world, options).unwrap();
-        assert_eq!(start.grids.len(), 1);
-        // A twist, so every spring is stretched and moving.
-        for (i, (x, v)) in start.x.iter_mut().zip(&mut start.v).enumerate() {
-            let t = i as f64 * 0.37;
-            *x += 0.01 * DVec3::new(t.sin(), t.cos(), (2.0 * t).sin());
-            *v = DVec3::new((3.0 * t).cos(), t.sin(), 0.5);
-        }
-        let (g, h) = (DVec3::new(0.0, -9.81, 0.0), 1e-3);
-        let run = |vector: Vector| {
-            let mut p = start.clone();
-            let mut pass = GridPass::default();
-            pass.prepare(&p, h, 3);
-            pass.vector = vector;
-            assert_eq!(pass.grids[0].1.len(), 3);
-            for _ in 0..20 {
-                pass.run(&mut p, &[], g, h, Update::VelocityFirst);
-            }
-            (p.x, p.v)
-        };
-        let levels = Vector::available();
-        let reference = run(Vector::Portable);
-        assert!(reference.0.iter().all(|x| x.is_finite()));
-        assert_ne!(reference.0, start.x);
-        for level in levels {
-            let (x, v) = run(level);
-            let same = |a: &[DVec3], b: &[DVec3]| {
-                a.iter()
-                    .zip(b)
-                    .all(|(p, q)| p.to_array().map(f64::to_bits) == q.to_array().map(f64::to_bits))
+        for (cols, rows) in [(70, 70), (16, 300), (9, 500), (5, 900)] {
+            let mut scene = crate::bench::hanging_cloth(cols);
+            scene.cloths[0].resolution = (cols, rows);
+            let built = scene.build();
+            let options = GatherOptions {
+                keep_grids: true,
+                colouring: false,
             };
-            assert!(
-                same(&x, &reference.0) && same(&v, &reference.1),
-                "{level:?}"
-            );
+            let mut start = Packed::gather_with(&built.world, options).unwrap();
+            assert_eq!(start.grids.len(), 1);
+            // A twist, so every spring is stretched and moving.
+            for (i, (x, v)) in start.x.iter_mut().zip(&mut start.v).enumerate() {
+                let t = i as f64 * 0.37;
+                *x += 0.01 * DVec3::new(t.sin(), t.cos(), (2.0 * t).sin());
+                *v = DVec3::new((3.0 * t).cos(), t.sin(), 0.5);
+            }
+            let (g, h) = (DVec3::new(0.0, -9.81, 0.0), 1e-3);
+            let run = |vector: Vector| {
+                let mut p = start.clone();
+                let mut pass = GridPass::default();
+                pass.prepare(&p, h, 3);
+                pass.vector = vector;
+                assert_eq!(pass.grids[0].1.len(), 3);
+                for _ in 0..20 {
+                    pass.run(&mut p, &[], g, h, Update::VelocityFirst);
+                }
+                (p.x, p.v)
+            };
+            let reference = run(Vector::Portable);
+            assert!(reference.0.iter().all(|x| x.is_finite()));
+            assert_ne!(reference.0, start.x);
+            for level in Vector::available() {
+                let (x, v) = run(level);
+                let same = |a: &[DVec3], b: &[DVec3]| {
+                    a.iter().zip(b).all(|(p, q)| {
+                        p.to_array().map(f64::to_bits) == q.to_array().map(f64::to_bits)
+                    })
+                };
+                assert!(
+                    same(&x, &reference.0) && same(&v, &reference.1),
+                    "{cols}×{rows}: {level:?}"
+                );
+            }
         }
     }
 }
