@@ -5,19 +5,24 @@ mod common;
 
 use harmonic::prelude::*;
 
-fn run(path: &str, integrator: Option<&str>, threads: usize, frames: usize) -> Vec<DVec3> {
+/// The state after `frames` frames of `scene`, stepped on a pool of `threads` threads.
+fn state_on(threads: usize, scene: &Scene, frames: usize) -> Vec<DVec3> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
     pool.install(|| {
-        let mut scene = Scene::load(path).unwrap();
-        if let Some(name) = integrator {
-            scene.integrator = Some(name.to_string());
-        }
-        let mut sim = Simulation::from_scene(&scene).unwrap();
+        let mut sim = Simulation::from_scene(scene).unwrap();
         common::run_state(&mut sim, frames)
     })
+}
+
+fn run(path: &str, integrator: Option<&str>, threads: usize, frames: usize) -> Vec<DVec3> {
+    let mut scene = Scene::load(path).unwrap();
+    if let Some(name) = integrator {
+        scene.integrator = Some(name.to_string());
+    }
+    state_on(threads, &scene, frames)
 }
 
 fn same_bits(a: &[DVec3], b: &[DVec3]) -> bool {
@@ -58,20 +63,12 @@ fn one_thread_and_two_give_the_same_bits() {
 #[test]
 fn cloths_side_by_side_match_each_cloth_alone() {
     let frames = 200;
-    let on = |threads: usize, scene: &Scene| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            let mut sim = Simulation::from_scene(scene).unwrap();
-            assert_eq!(sim.packed().grids.len(), scene.cloths.len());
-            common::run_state(&mut sim, frames)
-        })
-    };
+    let on = |threads: usize, scene: &Scene| state_on(threads, scene, frames);
     // 9 cloths of 24×24: 5,184 particles, enough for the pass to split them over threads.
     let (n, k) = (24, 9);
     let all = harmonic::bench::hanging_cloths(n, k);
+    let grids = Simulation::from_scene(&all).unwrap().packed().grids.len();
+    assert_eq!(grids, k as usize, "each cloth on the grid pass");
     let (one, two) = (on(1, &all), on(2, &all));
     assert!(one.iter().all(|x| x.is_finite()));
     assert!(same_bits(&one, &two), "1 and 2 threads differ");
