@@ -21,7 +21,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::harmonic::{self, Linear};
-use super::{euler_move, par, Update};
+use super::{axial, euler_move, par, Update};
 use crate::buffers::{Incidence, Packed, PackedGrid};
 use crate::components::GridLink;
 
@@ -84,8 +84,13 @@ impl Vector {
     }
 
     /// The widest this CPU runs, or the level `HARMONIC_SIMD` names (`portable`, `avx2`,
-    /// `avx512`) when the CPU runs it: to measure what each level buys.
+    /// `avx512`) when the CPU runs it: to measure what each level buys. Decided once.
     fn chosen() -> Self {
+        static CHOSEN: std::sync::OnceLock<Vector> = std::sync::OnceLock::new();
+        *CHOSEN.get_or_init(Self::decide)
+    }
+
+    fn decide() -> Self {
         let mut levels = Self::available();
         let named = std::env::var("HARMONIC_SIMD").ok();
         if let Some(k) = levels
@@ -431,20 +436,20 @@ impl Ctx<'_> {
                 }
             }
             if own {
+                let Shared {
+                    incidence,
+                    sdv,
+                    g,
+                    h,
+                    update,
+                    ..
+                } = *self.shared;
                 let s = slot(a);
                 for c in 0..cols {
                     let k = (a - r0) * cols + c;
                     let i = a * cols + c;
                     if self.inv[i] != 0.0 {
                         let sum = DVec3::new(ring[0][s + c], ring[1][s + c], ring[2][s + c]);
-                        let Shared {
-                            incidence,
-                            sdv,
-                            g,
-                            h,
-                            update,
-                            ..
-                        } = *self.shared;
                         let dv = sum + incidence.sum(sdv, self.grid.base as usize + i);
                         (x[k], v[k]) = euler_move(update, x[k], v[k], dv, g, h);
                     }
@@ -556,8 +561,8 @@ fn link_row(
     }
 }
 
-/// One chunk of [`link_row`]: `m` springs from `k`. The same operations, in the same order,
-/// as [`super::axial`] and [`Linear::phi`].
+/// One chunk of [`link_row`]: `m` springs from `k`, each through [`axial`] and
+/// [`Linear::phi`], the math every pass shares (inlined, the lanes vectorise).
 #[inline(always)]
 fn link_chunk(
     a: &[[&[f64]; 3]; 2],
@@ -576,16 +581,13 @@ fn link_chunk(
     let (bvx, bvy, bvz) = (get(bvx, k, m), get(bvy, k, m), get(bvz, k, m));
     let (mut fx, mut fy, mut fz) = ([0.0; L], [0.0; L], [0.0; L]);
     for i in 0..L {
-        let (dx, dy, dz) = (bx[i] - ax[i], by[i] - ay[i], bz[i] - az[i]);
-        let len = (dx * dx + dy * dy + dz * dz).sqrt();
-        let inv = 1.0 / len;
-        let (nx, ny, nz) = (dx * inv, dy * inv, dz * inv);
-        let delta = len - rest;
-        let delta_dot = nx * (bvx[i] - avx[i]) + ny * (bvy[i] - avy[i]) + nz * (bvz[i] - avz[i]);
-        let phi = l.p * delta + l.q * delta_dot;
-        fx[i] = phi * nx;
-        fy[i] = phi * ny;
-        fz[i] = phi * nz;
+        let xa = DVec3::new(ax[i], ay[i], az[i]);
+        let xb = DVec3::new(bx[i], by[i], bz[i]);
+        let va = DVec3::new(avx[i], avy[i], avz[i]);
+        let vb = DVec3::new(bvx[i], bvy[i], bvz[i]);
+        let (n, delta, delta_dot) = axial(xa, xb, va, vb, rest);
+        let fi = l.phi(delta, delta_dot) * n;
+        (fx[i], fy[i], fz[i]) = (fi.x, fi.y, fi.z);
     }
     put(&mut f[0], k, m, &fx);
     put(&mut f[1], k, m, &fy);
