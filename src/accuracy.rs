@@ -110,14 +110,13 @@ pub const PEER: &str = "rapier-soft-body";
 #[cfg(feature = "rapier")]
 pub const RAPIER_SUBSTEPS: [usize; 4] = [4, 8, 16, 32];
 
-pub const CONTENDERS: [Integrator; 9] = [
+pub const CONTENDERS: [Integrator; 8] = [
     Integrator::Harmonic,
     Integrator::HarmonicGs,
     Integrator::HarmonicSgs,
     Integrator::HarmonicForced,
     Integrator::HarmonicForcedGs,
     Integrator::SymplecticEuler,
-    Integrator::Imex,
     Integrator::ImplicitEuler,
     Integrator::Xpbd,
 ];

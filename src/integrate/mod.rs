@@ -3,7 +3,6 @@
 mod gauss_seidel;
 pub(crate) mod grid;
 pub mod harmonic;
-pub mod imex;
 pub mod implicit;
 pub mod paper;
 pub(crate) mod par;
@@ -43,9 +42,6 @@ pub enum Integrator {
     /// Symmetric Gauss–Seidel: a forward then a backward colour sweep, each applying half of
     /// the closed-form impulse for the full step.
     HarmonicSgs,
-    /// Symplectic Euler with the damping linearly implicit: one contracting Jacobi pass of
-    /// backward Euler's damping solve after the stiffness kick ([`imex`]).
-    Imex,
     /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
     ImplicitEuler,
     /// Small-step XPBD, one iteration per substep.
@@ -53,7 +49,7 @@ pub enum Integrator {
 }
 
 impl Integrator {
-    pub const ALL: [Integrator; 12] = [
+    pub const ALL: [Integrator; 11] = [
         Integrator::Harmonic,
         Integrator::HarmonicGs,
         Integrator::HarmonicSgs,
@@ -62,7 +58,6 @@ impl Integrator {
         Integrator::HarmonicPaper,
         Integrator::SymplecticEuler,
         Integrator::ExplicitEuler,
-        Integrator::Imex,
         Integrator::ImplicitEuler,
         Integrator::Xpbd,
         Integrator::Rk4,
@@ -101,7 +96,6 @@ impl Integrator {
             Integrator::HarmonicSgs => "harmonic-sgs",
             Integrator::HarmonicForced => "harmonic-forced",
             Integrator::HarmonicForcedGs => "harmonic-forced-gs",
-            Integrator::Imex => "imex",
             Integrator::ImplicitEuler => "implicit-euler",
             Integrator::Xpbd => "xpbd",
         }
@@ -181,7 +175,6 @@ pub struct Solver {
     pacc: Vec<DVec3>,
     force: Vec<f64>,
     implicit: implicit::Implicit,
-    imex: imex::Imex,
     xpbd: xpbd::Xpbd,
     grid: grid::GridPass,
 }
@@ -204,7 +197,6 @@ impl Solver {
             pacc: Vec::new(),
             force: Vec::new(),
             implicit: implicit::Implicit::default(),
-            imex: imex::Imex::default(),
             xpbd: xpbd::Xpbd::default(),
             grid: grid::GridPass::default(),
         }
@@ -293,7 +285,6 @@ impl Solver {
                 self.rk = vec![vec![DVec3::ZERO; n]; 10];
             }
             Integrator::ImplicitEuler => self.implicit.resize(n, m),
-            Integrator::Imex => self.imex.prepare(packed, h),
             Integrator::Xpbd => self.xpbd.resize(n),
             Integrator::HarmonicPaper => {
                 for (k, s) in packed.springs.iter().enumerate() {
@@ -402,41 +393,6 @@ impl Solver {
                 gauss_seidel::sweep(packed, &self.swept, Some(&self.force), false);
                 gauss_seidel::add_gravity(packed, g, h);
                 gauss_seidel::drift(packed, h);
-            }
-            Integrator::Imex => {
-                let stiff = Law::Linear(&self.imex.stiffness);
-                spring_pass(
-                    &packed.springs,
-                    &packed.x,
-                    &packed.v,
-                    stiff,
-                    &mut self.sdv,
-                    None,
-                    false,
-                );
-                let damped = !self.imex.damping.is_empty();
-                imex::kick(packed, &self.sdv, None, g, h, !damped);
-                if damped {
-                    // Reads the kicked velocities: guarded, as a pass that chains.
-                    let law = Law::Linear(&self.imex.damping);
-                    spring_pass(
-                        &packed.springs,
-                        &packed.x,
-                        &packed.v,
-                        law,
-                        &mut self.sdv,
-                        None,
-                        true,
-                    );
-                    imex::kick(
-                        packed,
-                        &self.sdv,
-                        Some(&self.imex.relax),
-                        DVec3::ZERO,
-                        h,
-                        true,
-                    );
-                }
             }
             Integrator::ImplicitEuler => self.implicit.step(packed, g, h),
             Integrator::Xpbd => self.xpbd.step(packed, g, h),
