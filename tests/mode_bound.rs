@@ -69,9 +69,8 @@ fn one_pass_thresholds_follow_the_mode_closed_form() {
         let hc = stability::h_crit(&p);
         for integrator in [Integrator::SymplecticEuler, Integrator::Harmonic] {
             let r = predicted(integrator, zeta, k_max);
-            let growth = |f: f64| {
-                stability::growth_rate(&p, integrator, false, f * r * hc, 4000).unwrap()
-            };
+            let growth =
+                |f: f64| stability::growth_rate(&p, integrator, false, f * r * hc, 4000).unwrap();
             let (below, above) = (growth(0.99), growth(1.01));
             println!(
                 "{}, {}: k_max {k_max:.4}, predicted {r:.4} h/h_c; growth {below:.6} at 0.99×, {above:.6} at 1.01×",
@@ -83,5 +82,8 @@ fn one_pass_thresholds_follow_the_mode_closed_form() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 8, "the chain and the cloth, ζ = 0 and 0.2, two integrators");
+    assert_eq!(
+        checked, 8,
+        "the chain and the cloth, ζ = 0 and 0.2, two integrators"
+    );
 }
