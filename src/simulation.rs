@@ -790,8 +790,14 @@ impl Simulation {
         let gpu = self.gpu.is_some();
         #[cfg(not(feature = "gpu"))]
         let gpu = false;
+        let i = self.config.integrator;
+        let keep_grids = if gpu {
+            i.runs_on_gpu_grids()
+        } else {
+            i.runs_on_grids() && !(i == Integrator::Harmonic && self.config.exact_displacement)
+        };
         GatherOptions {
-            keep_grids: self.config.integrator.runs_on_grids(),
+            keep_grids,
             colouring: gpu || self.config.integrator.needs_colouring(),
         }
     }

@@ -1,6 +1,6 @@
 //! Cloth springs kept as one grid component: the grid pass (symplectic and explicit Euler,
-//! no memory per spring) against the same springs spawned one by one, and the errors a
-//! grid that no longer matches its particles gives.
+//! and the closed form, no memory per spring) against the same springs spawned one by one,
+//! and the errors a grid that no longer matches its particles gives.
 
 mod common;
 
@@ -66,52 +66,109 @@ fn the_grid_pass_matches_the_springs_one_by_one() {
     // 24×24 runs on the calling thread in one band; 72×72 in bands on rayon's pool; rows of 5
     // and 9 (shorter than the pass's chunks of 8, and one over) in bands too.
     for n in [(24, 24), (72, 72), (5, 900), (9, 500)] {
-        for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
+        for integrator in [
+            Integrator::SymplecticEuler,
+            Integrator::ExplicitEuler,
+            Integrator::Harmonic,
+        ] {
             let mut scene = cloth(n, integrator);
             // Explicit Euler grows every mode at any step (and the rounding difference with
             // it): small steps, few frames.
-            let frames = if integrator == Integrator::ExplicitEuler {
-                scene.substeps = Some(64);
-                8
-            } else {
-                60
+            // The closed form's Jacobi sum is stable to 0.73× symplectic Euler's step on a cloth
+            // (STABILITY.md): 4× the substeps.
+            let frames = match integrator {
+                Integrator::ExplicitEuler => {
+                    scene.substeps = Some(64);
+                    8
+                }
+                Integrator::Harmonic => {
+                    scene.substeps = Some(16);
+                    30
+                }
+                _ => 60,
             };
-            let built = scene.build();
-            let mut grid = Simulation::with_props(built.world, built.config, None).unwrap();
-            assert_eq!(grid.packed().grids.len(), 1);
-            assert!(grid.packed().springs.is_empty());
-            let built = scene.build();
-            let world = springs_one_by_one(built.world);
-            let mut single = Simulation::with_props(world, built.config, None).unwrap();
-            assert!(single.packed().grids.is_empty());
-            assert_eq!(grid.packed().spring_count(), single.packed().spring_count());
-            let start = grid.positions().to_vec();
-            let (a, b) = (
-                common::run_state(&mut grid, frames),
-                common::run_state(&mut single, frames),
-            );
-            // Only the order of each particle's sum differs: agreement to rounding.
-            let worst = a
-                .iter()
-                .zip(&b)
-                .map(|(p, q)| (*p - *q).length())
-                .fold(0.0, f64::max);
-            let moved = start
-                .iter()
-                .zip(&a)
-                .map(|(p, q)| (*p - *q).length())
-                .fold(0.0, f64::max);
-            assert!(a.iter().all(|x| x.is_finite()));
-            assert!(
-                moved > 1e-4,
-                "{integrator} {n:?}: the cloth must move ({moved:e})"
-            );
-            assert!(
-                worst < 1e-10,
-                "{integrator} {n:?}: grid and single springs differ by {worst:e}"
-            );
+            grid_against_single(&scene, frames, |w| w, &format!("{integrator} {n:?}"));
         }
     }
+}
+
+/// Runs `scene` with its cloth kept as a grid and with its springs one by one, each World
+/// first changed by `edit`, and asserts they agree to rounding.
+fn grid_against_single(scene: &Scene, frames: usize, edit: impl Fn(World) -> World, what: &str) {
+    let built = scene.build();
+    let mut grid = Simulation::with_props(edit(built.world), built.config, None).unwrap();
+    assert_eq!(grid.packed().grids.len(), 1);
+    assert!(grid.packed().springs.is_empty());
+    let built = scene.build();
+    let world = springs_one_by_one(edit(built.world));
+    let mut single = Simulation::with_props(world, built.config, None).unwrap();
+    assert!(single.packed().grids.is_empty());
+    assert_eq!(grid.packed().spring_count(), single.packed().spring_count());
+    let start = grid.positions().to_vec();
+    let (a, b) = (
+        common::run_state(&mut grid, frames),
+        common::run_state(&mut single, frames),
+    );
+    // Only the order of each particle's sum differs: agreement to rounding.
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    let moved = start
+        .iter()
+        .zip(&a)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max);
+    let big = |s: &[glam::DVec3]| s.iter().map(|x| x.length()).fold(0.0, f64::max);
+    println!("{what}: max |x| grid {:e}, single {:e}", big(&a), big(&b));
+    assert!(a.iter().all(|x| x.is_finite()));
+    assert!(moved > 1e-4, "{what}: the cloth must move ({moved:e})");
+    assert!(
+        worst < 1e-10,
+        "{what}: grid and single springs differ by {worst:e}"
+    );
+}
+
+#[test]
+fn the_closed_form_on_a_grid_handles_any_masses() {
+    // The grid pass holds the closed form for one mass (the centre particle's); springs at a
+    // pin or at a particle of another mass are corrected one by one. Here: heavier particles
+    // along a row and a column, one lighter particle, and the centre itself changed, so the
+    // nominal mass is not the common one.
+    for n in [(24, 24), (72, 72)] {
+        let mut scene = cloth(n, Integrator::Harmonic);
+        scene.substeps = Some(16);
+        let cols = n.0;
+        let edit = |mut world: World| {
+            for (i, p) in world.query_mut::<(&SceneIndex, &mut Particle)>() {
+                let (c, r) = (i.0 % cols, i.0 / cols);
+                if r == 5 || c == 7 {
+                    p.mass *= 3.0;
+                }
+                if (c, r) == (2, 11) {
+                    p.mass *= 0.5;
+                }
+                if (c, r) == (cols / 2, n.1 / 2) {
+                    p.mass *= 1.7;
+                }
+            }
+            world
+        };
+        grid_against_single(&scene, 30, edit, &format!("harmonic {n:?}, uneven masses"));
+    }
+}
+
+#[test]
+fn exact_displacement_gets_the_grid_expanded() {
+    let mut sim = Simulation::from_scene(&cloth((16, 16), Integrator::Harmonic)).unwrap();
+    assert_eq!(sim.packed().grids.len(), 1);
+    let mut c = *sim.config();
+    c.exact_displacement = true;
+    sim.set_config(c).unwrap();
+    assert!(sim.packed().grids.is_empty());
+    sim.step().unwrap();
+    assert!(sim.positions().iter().all(|x| x.is_finite()));
 }
 
 #[test]

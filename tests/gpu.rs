@@ -358,7 +358,7 @@ fn gpu_matches_cpu_on_random_scenes() {
 }
 
 /// Two cloths kept whole as grids (symplectic and explicit Euler step them so on both back
-/// ends), one square, one not, with uneven masses, two pins each and a short rope of loose
+/// ends, the closed form on the CPU), one square, one not, with uneven masses, two pins each and a short rope of loose
 /// springs hung from a cloth particle (so a grid particle also gathers springs from the CSR
 /// list), every free particle started with its own velocity so the springs work from the
 /// first substep: the GPU's `grid_pass` against the CPU grid pass, damped and undamped.
@@ -425,6 +425,28 @@ fn cloth_grids_on_the_gpu_match_the_cpu_grid_pass() {
         world
     };
     let mut report = Vec::new();
+    // The closed form keeps the grids whole on the CPU only (its pass corrects the springs at
+    // pins and at the uneven masses one by one): the device's springs one by one against it.
+    for damping in [0.0, 0.02] {
+        let config = parity_config(&world(damping), 0.0, 0.0, Integrator::Harmonic);
+        let cpu = Simulation::new(world(damping), config).expect("CPU simulation");
+        assert_eq!(cpu.packed().grids.len(), 2);
+        let on_gpu = SimConfig {
+            backend: Backend::Gpu,
+            ..config
+        };
+        let gpu = Simulation::new(world(damping), on_gpu).expect("GPU simulation");
+        assert!(gpu.packed().grids.is_empty());
+        let frames = 30;
+        let (worst, extent, travel) =
+            cpu_against_gpu(world(damping), world(damping), config, frames).expect("steps");
+        let tolerance = 4.0 * f32::EPSILON as f64 * (frames * 10) as f64 * travel;
+        let ok = worst <= tolerance && extent < BOUNDED;
+        report.push(format!(
+            "{} harmonic (CPU grid, GPU springs), damping {damping}: max |Δx| {worst:.2e} m (tolerance {tolerance:.2e}), extent {extent:.2} m",
+            if ok { "ok  " } else { "FAIL" }
+        ));
+    }
     for integrator in [Integrator::SymplecticEuler, Integrator::ExplicitEuler] {
         for damping in [0.0, 0.02] {
             let probe = world(damping);
@@ -633,6 +655,8 @@ fn specialisation_follows_the_scene() {
     };
     assert_eq!(cloth("symplectic-euler"), (1, true));
     assert_eq!(cloth("harmonic-gs"), (0, false));
+    // The closed form's grid pass is the CPU's only.
+    assert_eq!(cloth("harmonic"), (0, false));
 }
 
 /// The device contact stage against the CPU's (parry's projections and ray casts): random

@@ -185,7 +185,7 @@ pub fn scaling(
         sim.step()?;
         let (particles, springs) = (sim.packed().particle_count(), sim.packed().spring_count());
         drop(sim);
-        let one_by_one = if integrator.runs_on_grids() {
+        let one_by_one = if integrator.runs_on_gpu_grids() {
             progress(&format!("{n}×{n} GPU, springs one by one"));
             let mut sim = simulation_of(&scene, springs_one_by_one, integrator, Backend::Gpu)?;
             let r = gpu_rate(&mut sim, repeats)?;

@@ -520,7 +520,7 @@ impl GpuSolver {
         integrator: Integrator,
     ) -> Result<(), GpuError> {
         self.contacts = None;
-        if !packed.grids.is_empty() && self.kernel != Kernel::Jacobi {
+        if !packed.grids.is_empty() && !integrator.runs_on_gpu_grids() {
             return Err(GpuError::Device {
                 adapter: self.ctx.describe(),
                 what: format!("{integrator} does not step cloth grids kept whole"),

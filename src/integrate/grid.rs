@@ -1,4 +1,5 @@
-//! Symplectic and explicit Euler over cloth grids ([`PackedGrid`]) with no memory per spring.
+//! Symplectic and explicit Euler, and the closed form (`harmonic`, Jacobi), over cloth grids
+//! ([`PackedGrid`]) with no memory per spring.
 //!
 //! Every link points forward in row-major order (gather makes it so), so a sweep over the
 //! rows evaluates each spring once, at its earlier end, and adds its change to both ends in a
@@ -52,6 +53,78 @@ struct Band {
 /// particle's own 1/m scales the result. The GPU's `grid_pass` takes the same.
 pub(crate) fn link_coefficients(l: &GridLink, h: f64) -> Linear {
     harmonic::euler(l.stiffness, 0.5 * l.damping, h)
+}
+
+/// A spring's closed-form coefficients in force form for two free ends of mass `m0`
+/// (μ = m0/2): `f = μ φ`, so each end's change is `∓ f n / m`, as for the Euler links. The
+/// closed form is not linear in 1/μ, so the pass holds it for one mass only ([`Fix`]).
+fn harmonic_link(stiffness: f64, damping: f64, m0: f64, h: f64) -> Linear {
+    let mu = 0.5 * m0;
+    let l = harmonic::harmonic(stiffness / mu, damping / (2.0 * mu), h);
+    Linear {
+        p: mu * l.p,
+        q: mu * l.q,
+        r: 0.0,
+        s: 0.0,
+    }
+}
+
+/// What a grid pass applies to its links.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum GridLaw {
+    /// Symplectic or explicit Euler: force-form coefficients, whatever the masses.
+    Euler,
+    /// The closed form (Jacobi, plain update), held for one free mass ([`nominal_inv_mass`]).
+    Harmonic,
+}
+
+/// A grid spring whose ends are not both of the grid's nominal mass (a pinned end included),
+/// under [`GridLaw::Harmonic`]: the pass applied the nominal force `f0`, the spring's own
+/// closed form wants `w φ` at each end, so the difference is added after the pass. Each is
+/// linear in the start-of-step state, so the sum is the spring's exact change.
+#[derive(Clone, Copy, Debug)]
+struct Fix {
+    a: usize,
+    b: usize,
+    rest: f64,
+    /// The spring's own closed form, relative (`φ`), and the nominal one in force form (`f0`).
+    own: Linear,
+    nominal: Linear,
+    /// `μ/m` of each end (0 where pinned) and its inverse mass.
+    wa: f64,
+    wb: f64,
+    ia: f64,
+    ib: f64,
+}
+
+impl Fix {
+    /// The velocity corrections of ends a and b from the start-of-step state.
+    fn dv(&self, x: &[DVec3], v: &[DVec3]) -> (DVec3, DVec3) {
+        let (n, delta, delta_dot) = axial(x[self.a], x[self.b], v[self.a], v[self.b], self.rest);
+        let (phi, f0) = (
+            self.own.phi(delta, delta_dot),
+            self.nominal.phi(delta, delta_dot),
+        );
+        (
+            -(self.wa * phi - self.ia * f0) * n,
+            (self.wb * phi - self.ib * f0) * n,
+        )
+    }
+}
+
+/// The inverse mass the pass holds the closed form for: the grid's centre particle's, or the
+/// first free one's if the centre is pinned (0 if none is free).
+fn nominal_inv_mass(g: &PackedGrid, inv_mass: &[f64]) -> f64 {
+    let range = g.range();
+    let centre = g.base as usize + (g.rows / 2 * g.cols + g.cols / 2) as usize;
+    if inv_mass[centre] != 0.0 {
+        return inv_mass[centre];
+    }
+    inv_mass[range]
+        .iter()
+        .copied()
+        .find(|&w| w != 0.0)
+        .unwrap_or(0.0)
 }
 
 /// The vector unit the band is compiled for. Every level gives the same bits (no fused
@@ -118,6 +191,10 @@ impl Vector {
 pub(crate) struct GridPass {
     grids: Vec<(Vec<Linear>, Vec<Band>)>,
     vector: Vector,
+    /// Corrections of the springs off the nominal mass ([`GridLaw::Harmonic`] only), and
+    /// their velocity changes for the current step.
+    fixes: Vec<Fix>,
+    fix_dv: Vec<(DVec3, DVec3)>,
 }
 
 fn soa(len: usize) -> Soa3 {
@@ -125,12 +202,46 @@ fn soa(len: usize) -> Soa3 {
 }
 
 impl GridPass {
-    /// Coefficients for step `h` and scratch for `packed`'s grids (`bands` per large grid).
-    pub(crate) fn prepare(&mut self, packed: &Packed, h: f64, bands: usize) {
+    /// Coefficients of `law` for step `h` and scratch for `packed`'s grids (`bands` per large
+    /// grid).
+    pub(crate) fn prepare(&mut self, packed: &Packed, h: f64, bands: usize, law: GridLaw) {
         self.grids.clear();
+        self.fixes.clear();
         self.vector = Vector::chosen();
         for g in &packed.grids {
-            let lin = g.links.iter().map(|l| link_coefficients(l, h)).collect();
+            let lin = match law {
+                GridLaw::Euler => g.links.iter().map(|l| link_coefficients(l, h)).collect(),
+                GridLaw::Harmonic => {
+                    let inv = &packed.inv_mass;
+                    let w0 = nominal_inv_mass(g, inv);
+                    let m0 = if w0 > 0.0 { 1.0 / w0 } else { 1.0 };
+                    let nominal = |s: &crate::buffers::PackedSpring| {
+                        harmonic_link(s.stiffness, s.damping, m0, h)
+                    };
+                    self.fixes.extend(
+                        g.springs(inv)
+                            .filter(|s| {
+                                let (ia, ib) = (inv[s.a as usize], inv[s.b as usize]);
+                                (ia != w0 || ib != w0) && (ia != 0.0 || ib != 0.0)
+                            })
+                            .map(|s| Fix {
+                                a: s.a as usize,
+                                b: s.b as usize,
+                                rest: s.rest,
+                                own: harmonic::harmonic(s.omega0_sq(), s.alpha(), h),
+                                nominal: nominal(&s),
+                                wa: s.wa,
+                                wb: s.wb,
+                                ia: inv[s.a as usize],
+                                ib: inv[s.b as usize],
+                            }),
+                    );
+                    g.links
+                        .iter()
+                        .map(|l| harmonic_link(l.stiffness, l.damping, m0, h))
+                        .collect()
+                }
+            };
             let (cols, rows, reach) = (g.cols as usize, g.rows as usize, g.reach());
             let count = if g.range().len() < par::PAR_MIN {
                 1
@@ -152,6 +263,8 @@ impl GridPass {
                 .collect();
             self.grids.push((lin, bands));
         }
+        self.fix_dv
+            .resize(self.fixes.len(), (DVec3::ZERO, DVec3::ZERO));
     }
 
     /// One substep of every grid's particles: `Δv` from its springs plus the incidence sum of
@@ -164,6 +277,25 @@ impl GridPass {
         h: f64,
         update: Update,
     ) {
+        // Read before the pass moves anything.
+        for (f, dv) in self.fixes.iter().zip(&mut self.fix_dv) {
+            *dv = f.dv(&packed.x, &packed.v);
+        }
+        self.run_pass(packed, sdv, g, h, update);
+        // `v += Δv, x += h Δv` is what the velocity-first move does with a summand it gets
+        // late; the harmonic law moves velocity first.
+        debug_assert!(self.fixes.is_empty() || update == Update::VelocityFirst);
+        for (f, &(dva, dvb)) in self.fixes.iter().zip(&self.fix_dv) {
+            for (i, dv) in [(f.a, dva), (f.b, dvb)] {
+                if packed.inv_mass[i] != 0.0 {
+                    packed.v[i] += dv;
+                    packed.x[i] += h * dv;
+                }
+            }
+        }
+    }
+
+    fn run_pass(&mut self, packed: &mut Packed, sdv: &[DVec3], g: DVec3, h: f64, update: Update) {
         let Packed {
             x,
             v,
@@ -645,7 +777,7 @@ mod tests {
             let run = |vector: Vector| {
                 let mut p = start.clone();
                 let mut pass = GridPass::default();
-                pass.prepare(&p, h, 3);
+                pass.prepare(&p, h, 3, GridLaw::Euler);
                 pass.vector = vector;
                 assert_eq!(pass.grids[0].1.len(), 3);
                 for _ in 0..20 {

@@ -63,9 +63,18 @@ impl Integrator {
         Integrator::Rk4,
     ];
 
-    /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are, with no
-    /// memory per spring; the others get the cloths' springs expanded one by one.
+    /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are on the CPU,
+    /// with no memory per spring (`harmonic` without exact displacement); the others get the
+    /// cloths' springs expanded one by one.
     pub fn runs_on_grids(self) -> bool {
+        matches!(
+            self,
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler | Integrator::Harmonic
+        )
+    }
+
+    /// Whether the GPU's `grid_pass` steps its cloth grids whole (the Euler integrators).
+    pub fn runs_on_gpu_grids(self) -> bool {
         matches!(
             self,
             Integrator::SymplecticEuler | Integrator::ExplicitEuler
@@ -221,14 +230,19 @@ impl Solver {
         if self.h == h && self.sized_for == (n, m) {
             return Ok(());
         }
-        if !packed.grids.is_empty() && !self.integrator.runs_on_grids() {
+        let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
+        if !packed.grids.is_empty() && (!self.integrator.runs_on_grids() || disp) {
             return Err(SimError::GridsUnsupported(self.integrator));
         }
         if !packed.grids.is_empty() {
-            self.grid.prepare(packed, h, grid_bands());
+            let law = if self.integrator == Integrator::Harmonic {
+                grid::GridLaw::Harmonic
+            } else {
+                grid::GridLaw::Euler
+            };
+            self.grid.prepare(packed, h, grid_bands(), law);
         }
         self.sdv.resize(m, DVec3::ZERO);
-        let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
         self.sdx.resize(if disp { m } else { 0 }, DVec3::ZERO);
         self.lin.clear();
         self.paper.clear();
