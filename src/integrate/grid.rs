@@ -81,7 +81,9 @@ pub(crate) enum GridLaw {
 /// A grid spring whose ends are not both of the grid's nominal mass (a pinned end included),
 /// under [`GridLaw::Harmonic`]: the pass applied the nominal force `f0`, the spring's own
 /// closed form wants `w φ` at each end, so the difference is added after the pass. Each is
-/// linear in the start-of-step state, so the sum is the spring's exact change.
+/// linear in the start-of-step state, so the sum is the spring's exact change. A cloth of one
+/// mass has only its pins' springs here; one of many masses has most of its springs here, run
+/// one after the other (correct, but slower than the springs one by one in parallel).
 #[derive(Clone, Copy, Debug)]
 struct Fix {
     a: usize,
@@ -215,9 +217,6 @@ impl GridPass {
                     let inv = &packed.inv_mass;
                     let w0 = nominal_inv_mass(g, inv);
                     let m0 = if w0 > 0.0 { 1.0 / w0 } else { 1.0 };
-                    let nominal = |s: &crate::buffers::PackedSpring| {
-                        harmonic_link(s.stiffness, s.damping, m0, h)
-                    };
                     self.fixes.extend(
                         g.springs(inv)
                             .filter(|s| {
@@ -229,7 +228,7 @@ impl GridPass {
                                 b: s.b as usize,
                                 rest: s.rest,
                                 own: harmonic::harmonic(s.omega0_sq(), s.alpha(), h),
-                                nominal: nominal(&s),
+                                nominal: harmonic_link(s.stiffness, s.damping, m0, h),
                                 wa: s.wa,
                                 wb: s.wb,
                                 ia: inv[s.a as usize],
