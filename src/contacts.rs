@@ -112,7 +112,8 @@ struct Candidate {
     form: Form,
     frame: Local,
     body: Option<RigidBodyHandle>,
-    /// World pose, and its box grown by the thickness.
+    /// World pose (the device stage's upload), and its box grown by the thickness.
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     pose: Pose,
     lo: DVec3,
     hi: DVec3,
