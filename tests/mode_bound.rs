@@ -87,3 +87,83 @@ fn one_pass_thresholds_follow_the_mode_closed_form() {
         "the chain and the cloth, ζ = 0 and 0.2, two integrators"
     );
 }
+
+/// The slowest mode of a free chain follows the same per-mode map: a free line of N equal
+/// masses has mode shapes cos(jπ(i + ½)/N) with k_j = 2 sin²(jπ/(2N)) (in units of ω0²), and
+/// moving along its own line the chain is exactly linear. Started in mode 1, the engine's
+/// chain must track `M(k_1)ⁿ` of the 2×2 map; there the closed form over-damps the mode by
+/// q/(−2ζθ) (STABILITY.md, "The slow modes"), while symplectic Euler's rate is the true one.
+#[test]
+fn the_slowest_mode_follows_the_mode_map() {
+    let (n, kappa, m, zeta) = (12usize, 400.0f64, 0.5f64, 0.2f64);
+    let mu = 0.5 * m;
+    let w0 = (kappa / mu).sqrt();
+    let c = 2.0 * zeta * (kappa * mu).sqrt();
+    let k1 = 2.0 * (std::f64::consts::PI / (2.0 * n as f64)).sin().powi(2);
+    let shape: Vec<f64> = (0..n)
+        .map(|i| (std::f64::consts::PI * (i as f64 + 0.5) / n as f64).cos())
+        .collect();
+    let y0 = 0.01;
+    for integrator in [Integrator::Harmonic, Integrator::SymplecticEuler] {
+        let r = 0.2;
+        let h = r * std::f64::consts::PI / w0;
+        let particles: String = (0..n)
+            .map(|i| {
+                format!(
+                    "(position: ({:e}, 0.0, 0.0), mass: {m}),",
+                    i as f64 + y0 * shape[i]
+                )
+            })
+            .collect();
+        let springs: String = (0..n - 1)
+            .map(|i| {
+                format!(
+                    "(a: {i}, b: {}, stiffness: {kappa}, damping: {c:e}, rest_length: 1.0),",
+                    i + 1
+                )
+            })
+            .collect();
+        let text = format!(
+            "Scene(dt: {h:e}, substeps: 1, gravity: (0.0, 0.0, 0.0), integrator: \"{}\",
+              particles: [{particles}], springs: [{springs}])",
+            integrator.name()
+        );
+        let scene = harmonic::Scene::parse(&text, "line").unwrap();
+        let mut sim = harmonic::Simulation::from_scene(&scene).unwrap();
+        // The map in units ω0 = 1 (θ = ω0 h), mode coordinate y and its rate y' = dy/dt / ω0.
+        let (p, q) = coefficients(integrator, zeta, r * std::f64::consts::PI);
+        let theta = r * std::f64::consts::PI;
+        let (mut y, mut yd) = (y0, 0.0);
+        let norm: f64 = shape.iter().map(|u| u * u).sum();
+        let mut worst: f64 = 0.0;
+        let steps = 200;
+        for _ in 0..steps {
+            sim.step().unwrap();
+            yd += p * k1 * y + q * k1 * yd;
+            y += theta * yd;
+            let measured = sim
+                .positions()
+                .iter()
+                .zip(&shape)
+                .enumerate()
+                .map(|(i, (x, u))| (x.x - i as f64) * u)
+                .sum::<f64>()
+                / norm;
+            worst = worst.max((measured - y).abs());
+        }
+        // The mode's damping per step, against the exact e^(−2ζθ k) of its determinant.
+        let rate = (1.0 + q * k1).ln() / (-2.0 * zeta * theta * k1);
+        println!(
+            "{}: mode 1 (k = {k1:.4}) after {steps} steps at {r} h_c: |y − map| ≤ {worst:.2e} (y0 {y0}); damping {rate:.3}× the true rate",
+            integrator.name()
+        );
+        assert!(worst < 1e-9, "{}: {worst:e}", integrator.name());
+        match integrator {
+            Integrator::SymplecticEuler => assert!((rate - 1.0).abs() < 0.01, "{rate}"),
+            _ => assert!(
+                rate > 1.3,
+                "the closed form over-damps the slow mode: {rate}"
+            ),
+        }
+    }
+}
