@@ -3,8 +3,14 @@
 //!
 //! `ω_max² ` is the largest eigenvalue of `M⁻¹K`, `K = Σ κ n nᵀ` over springs (axial
 //! stiffness at the current geometry), found by power iteration. The stable `ω_max h` of each
-//! integrator was measured with `harmonic stability` on the chain of 20 and the 8×8 cloth at
-//! damping ratios 0, 0.2, 1 and 2 (the smaller of the two systems, then a safety factor).
+//! integrator was measured (`stability::threshold`) on one spring, the chain of 20 and the 8×8
+//! cloth at the damping ratios of [`ZETAS`] (the smallest of the three, then a safety factor).
+//! The points are dense because a limit is convex in ζ where it falls (symplectic Euler's top
+//! mode: ω_max h = 2(√(ζ_m² + 1) − ζ_m), ζ_m the mode's own damping ratio), so a straight line
+//! between far points overestimates it: with points at 0.2 and 1 only, the default at ζ = 0.6
+//! blew up the 8×8 cloth. Between points the reciprocal is interpolated, exact for that shape
+//! far out and below the limit wherever the reciprocal is convex; past ζ = 2 the limit falls as
+//! 1/ζ, as symplectic Euler's does.
 
 use glam::DVec3;
 
@@ -156,8 +162,7 @@ fn power_iteration(packed: &Packed, iterations: usize) -> f64 {
 /// Largest stable `ω_max h` of an integrator at damping ratio `zeta`, or `None` when it has no
 /// stability limit.
 pub fn stable_omega_h(integrator: Integrator, zeta: f64) -> Option<f64> {
-    // Measured at ζ = 0, 0.2, 1, 2 (see module docs); interpolated linearly, held beyond 2.
-    let table: [f64; 4] = match integrator {
+    let table: [f64; ZETAS.len()] = match integrator {
         Integrator::ImplicitEuler | Integrator::Xpbd => return None,
         Integrator::SymplecticEuler => TABLE_SE,
         Integrator::ExplicitEuler => TABLE_EE,
@@ -168,24 +173,49 @@ pub fn stable_omega_h(integrator: Integrator, zeta: f64) -> Option<f64> {
         Integrator::HarmonicForcedGs => TABLE_FGS,
         Integrator::Rk4 => TABLE_RK4,
     };
-    let z = [0.0, 0.2, 1.0, 2.0];
-    let zeta = zeta.clamp(0.0, 2.0);
-    let k = (0..3).find(|&k| zeta <= z[k + 1]).unwrap_or(2);
-    let t = (zeta - z[k]) / (z[k + 1] - z[k]);
-    Some(table[k] + t * (table[k + 1] - table[k]))
+    let last = ZETAS.len() - 1;
+    let zeta = zeta.max(0.0);
+    if zeta >= ZETAS[last] {
+        return Some(table[last] * ZETAS[last] / zeta);
+    }
+    let k = (0..last)
+        .find(|&k| zeta <= ZETAS[k + 1])
+        .unwrap_or(last - 1);
+    let t = (zeta - ZETAS[k]) / (ZETAS[k + 1] - ZETAS[k]);
+    Some(1.0 / (1.0 / table[k] + t * (1.0 / table[k + 1] - 1.0 / table[k])))
 }
 
-// ω_max·h at the measured thresholds (min of chain of 20, 8×8 cloth and a single spring).
-pub const TABLE_SE: [f64; 4] = [1.994, 1.31, 0.439, 0.228];
-pub const TABLE_EE: [f64; 4] = [0.051, 0.408, 0.49, 0.228];
-pub const TABLE_H: [f64; 4] = [1.453, 1.132, 0.524, 0.287];
-pub const TABLE_HF: [f64; 4] = [1.614, 1.614, 0.515, 0.262];
-/// Held by the single spring's plain-update limit at low damping; no limit measured at ζ = 2.
-pub const TABLE_GS: [f64; 4] = [1.72, 1.971, 8.885, 20.0];
+/// Damping ratios at which the limits were measured.
+pub const ZETAS: [f64; 11] = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0, 1.5, 2.0];
+// ω_max·h at the measured thresholds (the least of one spring, the chain of 20 and the 8×8
+// cloth; rounded down). 20 where none was found up to 8 h_c.
+pub const TABLE_SE: [f64; 11] = [
+    1.997, 1.607, 1.311, 1.083, 0.913, 0.778, 0.676, 0.533, 0.44, 0.296, 0.228,
+];
+/// Explicit Euler grows at any step undamped; ζ = 0 is where the growth passes the tolerance.
+pub const TABLE_EE: [f64; 11] = [
+    0.05, 0.215, 0.408, 0.604, 0.805, 1.001, 0.947, 0.634, 0.49, 0.313, 0.228,
+];
+pub const TABLE_H: [f64; 11] = [
+    1.455, 1.286, 1.133, 1.015, 0.905, 0.812, 0.736, 0.617, 0.524, 0.372, 0.287,
+];
+pub const TABLE_HF: [f64; 11] = [
+    1.616, 1.798, 1.616, 1.32, 1.1, 0.939, 0.812, 0.634, 0.516, 0.355, 0.262,
+];
+/// Held by the single spring's plain-update limit at low damping.
+pub const TABLE_GS: [f64; 11] = [
+    1.72, 1.798, 1.971, 3.294, 3.432, 3.632, 3.934, 5.273, 8.884, 20.0, 20.0,
+];
 /// Symmetric sweeps: the single spring caps it at h = h_c (ω h = π) when lightly damped.
-pub const TABLE_SGS: [f64; 4] = [std::f64::consts::PI, 3.208, 8.885, 20.0];
-pub const TABLE_FGS: [f64; 4] = [1.72, 1.614, 0.515, 0.262];
-pub const TABLE_RK4: [f64; 4] = [2.822, 2.661, 0.684, 0.321];
+pub const TABLE_SGS: [f64; 11] = [
+    3.141, 3.157, 3.208, 3.294, 3.428, 3.632, 3.934, 5.27, 8.884, 20.0, 20.0,
+];
+pub const TABLE_FGS: [f64; 11] = [
+    1.72, 1.798, 1.616, 1.32, 1.1, 0.939, 0.812, 0.634, 0.516, 0.355, 0.262,
+];
+pub const TABLE_RK4: [f64; 11] = [
+    2.826, 2.927, 2.665, 2.648, 2.618, 1.878, 1.311, 0.888, 0.685, 0.44, 0.321,
+];
 
 /// Fraction of the measured limit the controller uses.
 pub const SAFETY: f64 = 0.8;
