@@ -208,7 +208,17 @@ pub const TABLE_GS: [f64; 11] = [
 ];
 /// Symmetric sweeps: the single spring caps it at h = h_c (ω h = π) when lightly damped.
 pub const TABLE_SGS: [f64; 11] = [
-    3.141, 3.157, 3.208, 3.294, 3.428, 3.632, 3.934, 5.27, 8.884, 20.0, 20.0,
+    std::f64::consts::PI,
+    3.157,
+    3.208,
+    3.294,
+    3.428,
+    3.632,
+    3.934,
+    5.27,
+    8.884,
+    20.0,
+    20.0,
 ];
 pub const TABLE_FGS: [f64; 11] = [
     1.72, 1.798, 1.616, 1.32, 1.1, 0.939, 0.812, 0.634, 0.516, 0.355, 0.262,
