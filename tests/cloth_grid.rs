@@ -120,8 +120,6 @@ fn grid_against_single(scene: &Scene, frames: usize, edit: impl Fn(World) -> Wor
         .zip(&a)
         .map(|(p, q)| (*p - *q).length())
         .fold(0.0, f64::max);
-    let big = |s: &[glam::DVec3]| s.iter().map(|x| x.length()).fold(0.0, f64::max);
-    println!("{what}: max |x| grid {:e}, single {:e}", big(&a), big(&b));
     assert!(a.iter().all(|x| x.is_finite()));
     assert!(moved > 1e-4, "{what}: the cloth must move ({moved:e})");
     assert!(
