@@ -211,7 +211,7 @@ struct Runner<'a> {
 impl Runner<'_> {
     /// The buffers `integrator` runs on.
     fn on(&self, integrator: Integrator) -> &Packed {
-        if integrator.runs_on_grids() {
+        if integrator.runs_on_grids(false) {
             self.grid
         } else {
             self.packed

@@ -92,7 +92,7 @@ pub fn measure(
     let cases: Vec<(Integrator, bool)> = integrators
         .iter()
         .flat_map(|&i| {
-            let one_by_one = i.runs_on_grids().then_some((i, true));
+            let one_by_one = i.runs_on_grids(false).then_some((i, true));
             [(i, false)].into_iter().chain(one_by_one)
         })
         .collect();
@@ -101,7 +101,7 @@ pub fn measure(
         .iter()
         .map(|&(i, one_by_one)| {
             let mut s = Solver::new(i, false, g);
-            let mut p = if i.runs_on_grids() && !one_by_one {
+            let mut p = if i.runs_on_grids(false) && !one_by_one {
                 grid.clone()
             } else {
                 packed.clone()

@@ -794,7 +794,7 @@ impl Simulation {
         let keep_grids = if gpu {
             i.runs_on_gpu_grids()
         } else {
-            i.runs_on_grids() && !(i == Integrator::Harmonic && self.config.exact_displacement)
+            i.runs_on_grids(self.config.exact_displacement)
         };
         GatherOptions {
             keep_grids,

@@ -64,13 +64,14 @@ impl Integrator {
     ];
 
     /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are on the CPU,
-    /// with no memory per spring (`harmonic` without exact displacement); the others get the
-    /// cloths' springs expanded one by one.
-    pub fn runs_on_grids(self) -> bool {
-        matches!(
-            self,
-            Integrator::SymplecticEuler | Integrator::ExplicitEuler | Integrator::Harmonic
-        )
+    /// with no memory per spring (`harmonic` only without exact displacement); the others get
+    /// the cloths' springs expanded one by one.
+    pub fn runs_on_grids(self, exact_displacement: bool) -> bool {
+        match self {
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler => true,
+            Integrator::Harmonic => !exact_displacement,
+            _ => false,
+        }
     }
 
     /// Whether the GPU's `grid_pass` steps its cloth grids whole (the Euler integrators).
@@ -230,8 +231,7 @@ impl Solver {
         if self.h == h && self.sized_for == (n, m) {
             return Ok(());
         }
-        let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
-        if !packed.grids.is_empty() && (!self.integrator.runs_on_grids() || disp) {
+        if !packed.grids.is_empty() && !self.integrator.runs_on_grids(self.exact_displacement) {
             return Err(SimError::GridsUnsupported(self.integrator));
         }
         if !packed.grids.is_empty() {
@@ -243,6 +243,7 @@ impl Solver {
             self.grid.prepare(packed, h, grid_bands(), law);
         }
         self.sdv.resize(m, DVec3::ZERO);
+        let disp = self.integrator == Integrator::Harmonic && self.exact_displacement;
         self.sdx.resize(if disp { m } else { 0 }, DVec3::ZERO);
         self.lin.clear();
         self.paper.clear();
