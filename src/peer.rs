@@ -3,8 +3,10 @@
 //!
 //! rapier solves each edge as a soft distance constraint whose stiffness is a natural
 //! frequency and damping ratio normalised by the constraint's effective mass, which for a
-//! free pair is the reduced mass μ: the same `ω0 = √(κ/μ)` and `ζ` as ours. Its structural
-//! and shear edges share `edge_softness`, the skip-one edges `bend_softness`.
+//! free pair is the reduced mass μ: the same `ω0 = √(κ/μ)` and `ζ` as ours. At a pin the
+//! effective mass is the free particle's whole mass, so those edges (and shear edges whose
+//! spring differs from the structural one) get per-edge coefficients: with the material's alone
+//! rapier's cloth was twice as stiff at the pins and swung on another path (`tests/peer.rs`).
 
 use std::time::Instant;
 
@@ -26,17 +28,20 @@ fn rapier_cloth(
         return Err("the rapier peer maps cloths pinned at their top corners only".into());
     }
     let m = cloth.mass / (cols * rows) as f64;
-    let mu = m / 2.0;
-    let material = |s: &crate::scene::SpringSpec| {
+    // rapier normalises each edge's frequency by its effective mass 1/(w_a + w_b): μ = m/2
+    // between free particles, m at a pin. Ours resolves every cloth spring with μ = m/2, so an
+    // edge at a pin gets its own coefficients, or rapier would make it twice as stiff.
+    let coefficients = |s: &crate::scene::SpringSpec, m_eff: f64| {
         let (k, c) = s.resolve(m, m);
-        let w0 = (k / mu).sqrt();
+        let w0 = (k / m_eff).sqrt();
         SpringCoefficients::new(
             (w0 / (2.0 * std::f64::consts::PI)) as f32,
-            (c / (2.0 * (k * mu).sqrt())) as f32,
+            (c / (2.0 * (k * m_eff).sqrt())) as f32,
         )
     };
-    let edge = material(&cloth.structural);
-    let bend = cloth.bend.as_ref().map_or(edge, material);
+    let bend_spec = cloth.bend.as_ref().unwrap_or(&cloth.structural);
+    let edge = coefficients(&cloth.structural, m / 2.0);
+    let bend = coefficients(bend_spec, m / 2.0);
     let du = Vector::new((cloth.size.0 / (cols - 1) as f64) as f32, 0.0, 0.0);
     let step = (cloth.size.1 / (rows - 1) as f64) as f32;
     let dv = match cloth.plane {
@@ -57,14 +62,47 @@ fn rapier_cloth(
             _ => rapier_index(cols - 1, 0) as u32,
         });
     }
-    let builder = SoftBodyBuilder::cloth(origin, du, dv, cols, rows)
+    let mut builder = SoftBodyBuilder::cloth(origin, du, dv, cols, rows)
         .mass(cloth.mass as f32)
-        .pinned_particles(pins)
+        .pinned_particles(pins.iter().copied())
         .material(SoftBodyMaterial {
             edge_softness: edge,
             bend_softness: bend,
             ..Default::default()
         });
+    // rapier's cloth always has shear diagonals; ours only when the scene asks.
+    let diagonal = |e: &[u32; 2]| {
+        let d = builder.positions[e[0] as usize] - builder.positions[e[1] as usize];
+        d.dot(du).abs() > 0.0 && d.dot(dv).abs() > 0.0
+    };
+    if cloth.shear.is_none() {
+        builder.edges.retain(|e| !diagonal(e));
+    }
+    let shear_spec = cloth.shear.as_ref().unwrap_or(&cloth.structural);
+    // Overrides index `edges` then `bend_edges`: the shear edges when their spring differs from
+    // the structural one, and every edge at a pin.
+    let at_pin = |e: &[u32; 2]| pins.contains(&e[0]) || pins.contains(&e[1]);
+    let structural = builder.edges.len();
+    let overrides: Vec<_> = builder
+        .edges
+        .iter()
+        .chain(&builder.bend_edges)
+        .enumerate()
+        .filter_map(|(i, e)| {
+            let spec = if i >= structural {
+                bend_spec
+            } else if diagonal(e) {
+                shear_spec
+            } else {
+                &cloth.structural
+            };
+            let m_eff = if at_pin(e) { m } else { m / 2.0 };
+            let c = coefficients(spec, m_eff);
+            let default = if i >= structural { bend } else { edge };
+            (c != default).then_some((i as u32, c))
+        })
+        .collect();
+    builder.edge_softness.extend(overrides);
     Ok((builder, rapier_index))
 }
 
