@@ -107,7 +107,7 @@ fn rapier_cloth(
 }
 
 /// rapier's particle positions in our particle order.
-fn our_order(body: &SoftBody, cloth: &Cloth, index: impl Fn(usize, usize) -> usize) -> Vec<DVec3> {
+fn our_order(body: &SoftBody, cloth: &Cloth, index: &impl Fn(usize, usize) -> usize) -> Vec<DVec3> {
     let (cols, rows) = (cloth.resolution.0 as usize, cloth.resolution.1 as usize);
     let mut out = vec![DVec3::ZERO; cols * rows];
     for row in 0..rows {
@@ -121,18 +121,22 @@ fn our_order(body: &SoftBody, cloth: &Cloth, index: impl Fn(usize, usize) -> usi
 
 /// Positions at `seconds` (in our cloth's particle order) and the wall time of the steps.
 /// `substeps` is rapier's `num_solver_iterations` per 1/60 s step (its default is 4).
+/// `observe` sees the positions after every step, outside the timed region.
 pub fn run_cloth(
     cloth: &Cloth,
     gravity: DVec3,
     seconds: f64,
     substeps: usize,
+    observe: impl FnMut(&[DVec3]),
 ) -> Result<(Vec<DVec3>, f64), String> {
     let (builder, index) = rapier_cloth(cloth)?;
     let mut world = PhysicsWorld::new();
     world.gravity = gravity.as_vec3();
     world.integration_parameters.num_solver_iterations = substeps;
     let handle = insert(&mut world, builder.no_surface_collider(), cloth);
-    Ok(timed_run(&mut world, handle, seconds, cloth, index))
+    Ok(timed_run(
+        &mut world, handle, seconds, cloth, index, observe,
+    ))
 }
 
 /// rapier's cloth dropped on a fixed ball (its own contacts: the cloth's surface collider with
@@ -155,7 +159,7 @@ pub fn drape_on_ball(
         ColliderBuilder::ball(radius as f32).friction(friction as f32),
     );
     let handle = insert(&mut world, builder.particle_radius(thickness as f32), cloth);
-    Ok(timed_run(&mut world, handle, seconds, cloth, index))
+    Ok(timed_run(&mut world, handle, seconds, cloth, index, |_| ()))
 }
 
 /// Inserts the soft body with the cloth's initial velocity on its unpinned particles.
@@ -173,21 +177,24 @@ fn insert(world: &mut PhysicsWorld, builder: SoftBodyBuilder, cloth: &Cloth) -> 
 }
 
 /// Steps `world` through `seconds` at its own step: the soft body's positions (our order) and
-/// the wall time of the steps.
+/// the wall time of the steps; `observe` sees the positions after each step, untimed.
 fn timed_run(
     world: &mut PhysicsWorld,
     handle: SoftBodyHandle,
     seconds: f64,
     cloth: &Cloth,
     index: impl Fn(usize, usize) -> usize,
+    mut observe: impl FnMut(&[DVec3]),
 ) -> (Vec<DVec3>, f64) {
     let frames = (seconds / world.integration_parameters.dt as f64).round() as usize;
-    let t = Instant::now();
+    let mut wall = 0.0;
     for _ in 0..frames {
+        let t = Instant::now();
         world.step();
+        wall += t.elapsed().as_secs_f64();
+        observe(&our_order(&world.soft_bodies[handle], cloth, &index));
     }
-    let wall = t.elapsed().as_secs_f64();
-    (our_order(&world.soft_bodies[handle], cloth, index), wall)
+    (our_order(&world.soft_bodies[handle], cloth, &index), wall)
 }
 
 /// Largest and mean strain |ℓ − ℓ0|/ℓ0 of a cloth's structural edges (grid neighbours), from

@@ -17,7 +17,7 @@ fn rapiers_cloth_hangs_where_ours_does() {
     let ours = harmonic::statics::relax(&packed, G, 1e-6, 2_000_000);
     let (ours_max, _) = grid_strain(cloth, &ours.positions);
     // ζ = 0.2 has settled by 5 s; rapier at its default substeps.
-    let (theirs, _) = run_cloth(cloth, G, 5.0, 4).unwrap();
+    let (theirs, _) = run_cloth(cloth, G, 5.0, 4, |_| ()).unwrap();
     let (their_max, _) = grid_strain(cloth, &theirs);
     let sag = rms(&ours.positions, &packed.x);
     let apart = rms(&theirs, &ours.positions);
@@ -48,7 +48,7 @@ fn rapiers_cloth_converges_to_our_motion() {
         solver.substep(&mut p, h).unwrap();
     }
     let moved = rms(&p.x, &packed.x);
-    let error = |substeps| rms(&run_cloth(cloth, G, t, substeps).unwrap().0, &p.x);
+    let error = |substeps| rms(&run_cloth(cloth, G, t, substeps, |_| ()).unwrap().0, &p.x);
     let (coarse, fine) = (error(8), error(64));
     assert!(
         fine < 0.5 * coarse,
