@@ -36,7 +36,9 @@ struct Position {
 
 // A spring's ends are `ends[k]`; the rest is here. Past the springs (k ≥ params.springs), the
 // cloth grids' links: `ends` holds the link's (dc, dr) as i32 bits, and p, q are in force form
-// (the particle's own inverse mass scales φ n; wa unused). φ = p δ + q δ̇ (coefficients from
+// (the particle's own inverse mass scales φ n; wa unused). Under harmonic the springs include
+// the grid pass's corrections (grid::Fix): each as its own closed form, then as the nominal
+// force that particle_pass takes back. φ = p δ + q δ̇ (coefficients from
 // integrate::harmonic, computed once per h on the CPU); wa is end a's share of the relative
 // velocity change, m_b/(m_a+m_b) (0 when a is pinned), and end b's is 1 − wa. Two arrays, not
 // one struct, so no binding exceeds 128 MiB (lavapipe's limit) before 8 M springs.

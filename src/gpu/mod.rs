@@ -6,8 +6,11 @@
 //!
 //! The springs go to the device in colour order, so a Gauss–Seidel colour is a contiguous range
 //! and the Jacobi passes index the same array. Cloth grids kept whole (symplectic and explicit
-//! Euler) go as their links only: `grid_pass` finds each particle's neighbours from its grid
-//! position, as the CPU grid pass does, with no memory per spring. Coefficients (`p`, `q`) come
+//! Euler, `harmonic`) go as their links only: `grid_pass` finds each particle's neighbours from
+//! its grid position, as the CPU grid pass does, with no memory per spring. Under `harmonic`
+//! the links hold the closed form for one mass, and each spring the CPU pass corrects
+//! (`grid::Fix`) goes as two extra device springs, its own closed form and the nominal force
+//! taken back. Coefficients (`p`, `q`) come
 //! from the CPU ([`crate::integrate::harmonic`]), once per `h`: one definition of the spring
 //! math.
 
@@ -161,11 +164,10 @@ impl Specialisation {
                 .iter()
                 .filter(live)
                 .any(|&k| lin[k as usize].q != 0.0)
-                || packed
-                    .grids
-                    .iter()
-                    .flat_map(|g| &g.links)
-                    .any(|l| grid::link_coefficients(l, h).q != 0.0),
+                || packed.grids.iter().flat_map(|g| &g.links).any(|l| {
+                    // The closed form responds to δ̇ even undamped (q = cos ωh − 1).
+                    integrator == Integrator::Harmonic || grid::link_coefficients(l, h).q != 0.0
+                }),
             pins: packed.inv_mass.contains(&0.0),
             update: u32::from(integrator == Integrator::ExplicitEuler),
             grids: !packed.grids.is_empty(),
@@ -394,6 +396,8 @@ pub struct GpuSolver {
     pub specialise: bool,
     /// The host copy of the spring coefficients, in device order, for step changes.
     host_coefs: Vec<Coef>,
+    /// The grids step under the closed form (`grid::GridLaw::Harmonic`), not Euler.
+    harmonic_grids: bool,
     /// Host scratch for state uploads.
     host_pos: Vec<Position>,
     host_vel: Vec<[f32; 4]>,
@@ -461,6 +465,7 @@ impl GpuSolver {
             kernel,
             specialise: true,
             host_coefs: Vec::new(),
+            harmonic_grids: false,
             host_pos: Vec::new(),
             host_vel: Vec::new(),
             h: f32::NAN,
@@ -535,11 +540,16 @@ impl GpuSolver {
         }
         let n = packed.particle_count();
         let order = &packed.colouring.springs;
+        self.harmonic_grids = integrator == Integrator::Harmonic;
+        let (fixes, grid_coefs) = grid_device(packed, h, self.harmonic_grids);
         // Device index of each packed spring (u32::MAX: both ends pinned, not on the device).
         let mut device_index = vec![u32::MAX; packed.springs.len()];
         for (j, &k) in order.iter().enumerate() {
             device_index[k as usize] = j as u32;
         }
+        // Device springs: the packed ones in colour order, then each fix twice (its own
+        // closed form, then the nominal force it takes back); then the grids' links.
+        let springs_len = order.len() + 2 * fixes.len();
         // The springs' ends, then the grids' link offsets (as i32 bits).
         let ends: Vec<[u32; 2]> = order
             .iter()
@@ -547,6 +557,7 @@ impl GpuSolver {
                 let s = &packed.springs[k as usize];
                 [s.a, s.b]
             })
+            .chain(fixes.iter().chain(&fixes).map(|f| [f.a as u32, f.b as u32]))
             .chain(
                 packed
                     .grids
@@ -567,20 +578,10 @@ impl GpuSolver {
                 }
             })
             .collect();
-        self.host_coefs.extend(grid_coefs(packed, h));
+        self.host_coefs.extend(grid_coefs);
         fill_state(packed, &mut self.host_pos, &mut self.host_vel);
         let (positions, velocities) = (&self.host_pos, &self.host_vel);
-        let inc = &packed.incidence;
-        let offsets = inc.offsets.clone();
-        let entries: Vec<Entry> = inc
-            .spring
-            .iter()
-            .zip(&inc.coef)
-            .map(|(&k, &c)| Entry {
-                spring: device_index[k as usize],
-                coef: c as f32,
-            })
-            .collect();
+        let (offsets, entries) = incidence(packed, &device_index, &fixes, order.len());
         // Dynamic offsets must be multiples of the alignment, and a step must hold a Range.
         let stride = (std::mem::size_of::<Range>() as u32)
             .next_multiple_of(self.ctx.limits.min_uniform_buffer_offset_alignment.max(16));
@@ -621,12 +622,12 @@ impl GpuSolver {
             colour_bytes[at..at + range_size].copy_from_slice(bytemuck::bytes_of(r));
         }
         // Per spring, then (with grids) per particle: what grid_pass summed, zero elsewhere.
-        let sdv_len = order.len() + if packed.grids.is_empty() { 0 } else { n };
+        let sdv_len = springs_len + if packed.grids.is_empty() { 0 } else { n };
         let params = Params {
             gravity: gravity.as_vec3().to_array(),
             h: h as f32,
             particles: n as u32,
-            springs: order.len() as u32,
+            springs: springs_len as u32,
             one: 1.0,
             ..Params::default()
         };
@@ -709,7 +710,7 @@ impl GpuSolver {
                 grids,
                 colour_stride: stride,
                 particles: n as u32,
-                springs_len: order.len() as u32,
+                springs_len: springs_len as u32,
             }
         })?;
         self.buffers = Some(buffers);
@@ -731,7 +732,8 @@ impl GpuSolver {
             c.q = lin[k as usize].q as f32;
         }
         self.host_coefs.truncate(springs);
-        self.host_coefs.extend(grid_coefs(packed, h));
+        self.host_coefs
+            .extend(grid_device(packed, h, self.harmonic_grids).1);
         let q = &self.ctx.queue;
         q.write_buffer(&b.coefs, 0, bytemuck::cast_slice(&self.host_coefs));
         // h is the 4th f32 of Params.
@@ -1005,17 +1007,90 @@ fn fill_state(packed: &Packed, pos: &mut Vec<Position>, vel: &mut Vec<[f32; 4]>)
     }));
 }
 
-/// The grids' link coefficients for step `h`, in device order (after the springs').
-fn grid_coefs(packed: &Packed, h: f64) -> impl Iterator<Item = Coef> + '_ {
-    packed.grids.iter().flat_map(|g| &g.links).map(move |l| {
-        let c = grid::link_coefficients(l, h);
-        Coef {
+/// What the grids add on the device for step `h`: the closed form's fixes (none under Euler),
+/// and the coefficients after the packed springs': each fix's own closed form, each fix's
+/// nominal force, then the grids' links (`grid_pass`'s).
+fn grid_device(packed: &Packed, h: f64, harmonic: bool) -> (Vec<grid::Fix>, Vec<Coef>) {
+    let (mut fixes, mut links) = (Vec::new(), Vec::new());
+    for g in &packed.grids {
+        let lin = if harmonic {
+            let (lin, f) = grid::harmonic_grid(g, &packed.inv_mass, h);
+            fixes.extend(f);
+            lin
+        } else {
+            g.links
+                .iter()
+                .map(|l| grid::link_coefficients(l, h))
+                .collect()
+        };
+        links.extend(g.links.iter().zip(lin).map(|(l, c)| Coef {
             rest: l.rest_length as f32,
             p: c.p as f32,
             q: c.q as f32,
             wa: 0.0,
+        }));
+    }
+    let own = fixes.iter().map(|f| Coef {
+        rest: f.rest as f32,
+        p: f.own.p as f32,
+        q: f.own.q as f32,
+        wa: f.wa as f32,
+    });
+    let nominal = fixes.iter().map(|f| Coef {
+        rest: f.rest as f32,
+        p: f.nominal.p as f32,
+        q: f.nominal.q as f32,
+        wa: 0.0,
+    });
+    let coefs = own.chain(nominal).chain(links).collect();
+    (fixes, coefs)
+}
+
+/// The particles' lists of device springs (CSR): each packed spring's entry (`−wa` at end a,
+/// `+wb` at b, of `φ n`), then the fixes' at free ends: `∓w` of their own `φ n` and `±1/m` of
+/// the nominal force, which cancels what `grid_pass` applied (the CPU's `Fix::dv`).
+fn incidence(
+    packed: &Packed,
+    device_index: &[u32],
+    fixes: &[grid::Fix],
+    first_fix: usize,
+) -> (Vec<u32>, Vec<Entry>) {
+    let inc = &packed.incidence;
+    let n = packed.particle_count();
+    let mut extra: Vec<Vec<Entry>> = vec![Vec::new(); if fixes.is_empty() { 0 } else { n }];
+    for (j, f) in fixes.iter().enumerate() {
+        let (own, nominal) = ((first_fix + j) as u32, (first_fix + fixes.len() + j) as u32);
+        for (i, w, im, sign) in [(f.a, f.wa, f.ia, -1.0), (f.b, f.wb, f.ib, 1.0)] {
+            if im != 0.0 {
+                extra[i].push(Entry {
+                    spring: own,
+                    coef: (sign * w) as f32,
+                });
+                extra[i].push(Entry {
+                    spring: nominal,
+                    coef: (-sign * im) as f32,
+                });
+            }
         }
-    })
+    }
+    let mut offsets = Vec::with_capacity(n + 1);
+    let mut entries = Vec::with_capacity(inc.spring.len() + 4 * fixes.len());
+    for i in 0..n {
+        offsets.push(entries.len() as u32);
+        let (lo, hi) = match inc.offsets.get(i..i + 2) {
+            Some(&[lo, hi]) => (lo as usize, hi as usize),
+            _ => (0, 0),
+        };
+        entries.extend((lo..hi).map(|e| Entry {
+            spring: device_index[inc.spring[e] as usize],
+            coef: inc.coef[e] as f32,
+        }));
+        if let Some(x) = extra.get(i) {
+            entries.extend_from_slice(x);
+        }
+    }
+    offsets.push(entries.len() as u32);
+    (offsets, entries)
 }
 
 /// `len` bytes of f32 NaN.

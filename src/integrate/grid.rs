@@ -85,18 +85,18 @@ pub(crate) enum GridLaw {
 /// mass has only its pins' springs here; one of many masses has most of its springs here, run
 /// one after the other (correct, but slower than the springs one by one in parallel).
 #[derive(Clone, Copy, Debug)]
-struct Fix {
-    a: usize,
-    b: usize,
-    rest: f64,
+pub(crate) struct Fix {
+    pub(crate) a: usize,
+    pub(crate) b: usize,
+    pub(crate) rest: f64,
     /// The spring's own closed form, relative (`φ`), and the nominal one in force form (`f0`).
-    own: Linear,
-    nominal: Linear,
+    pub(crate) own: Linear,
+    pub(crate) nominal: Linear,
     /// `μ/m` of each end (0 where pinned) and its inverse mass.
-    wa: f64,
-    wb: f64,
-    ia: f64,
-    ib: f64,
+    pub(crate) wa: f64,
+    pub(crate) wb: f64,
+    pub(crate) ia: f64,
+    pub(crate) ib: f64,
 }
 
 impl Fix {
@@ -112,6 +112,37 @@ impl Fix {
             (self.wb * phi - self.ib * f0) * n,
         )
     }
+}
+
+/// The closed form on grid `g` for step `h`, as the CPU pass and the device's `grid_pass` both
+/// apply it: each link's coefficients for the nominal mass, and the springs that need a [`Fix`].
+pub(crate) fn harmonic_grid(g: &PackedGrid, inv: &[f64], h: f64) -> (Vec<Linear>, Vec<Fix>) {
+    let w0 = nominal_inv_mass(g, inv);
+    let m0 = if w0 > 0.0 { 1.0 / w0 } else { 1.0 };
+    let fixes = g
+        .springs(inv)
+        .filter(|s| {
+            let (ia, ib) = (inv[s.a as usize], inv[s.b as usize]);
+            (ia != w0 || ib != w0) && (ia != 0.0 || ib != 0.0)
+        })
+        .map(|s| Fix {
+            a: s.a as usize,
+            b: s.b as usize,
+            rest: s.rest,
+            own: harmonic::harmonic(s.omega0_sq(), s.alpha(), h),
+            nominal: harmonic_link(s.stiffness, s.damping, m0, h),
+            wa: s.wa,
+            wb: s.wb,
+            ia: inv[s.a as usize],
+            ib: inv[s.b as usize],
+        })
+        .collect();
+    let links = g
+        .links
+        .iter()
+        .map(|l| harmonic_link(l.stiffness, l.damping, m0, h))
+        .collect();
+    (links, fixes)
 }
 
 /// The inverse mass the pass holds the closed form for: the grid's centre particle's, or the
@@ -214,31 +245,9 @@ impl GridPass {
             let lin = match law {
                 GridLaw::Euler => g.links.iter().map(|l| link_coefficients(l, h)).collect(),
                 GridLaw::Harmonic => {
-                    let inv = &packed.inv_mass;
-                    let w0 = nominal_inv_mass(g, inv);
-                    let m0 = if w0 > 0.0 { 1.0 / w0 } else { 1.0 };
-                    self.fixes.extend(
-                        g.springs(inv)
-                            .filter(|s| {
-                                let (ia, ib) = (inv[s.a as usize], inv[s.b as usize]);
-                                (ia != w0 || ib != w0) && (ia != 0.0 || ib != 0.0)
-                            })
-                            .map(|s| Fix {
-                                a: s.a as usize,
-                                b: s.b as usize,
-                                rest: s.rest,
-                                own: harmonic::harmonic(s.omega0_sq(), s.alpha(), h),
-                                nominal: harmonic_link(s.stiffness, s.damping, m0, h),
-                                wa: s.wa,
-                                wb: s.wb,
-                                ia: inv[s.a as usize],
-                                ib: inv[s.b as usize],
-                            }),
-                    );
-                    g.links
-                        .iter()
-                        .map(|l| harmonic_link(l.stiffness, l.damping, m0, h))
-                        .collect()
+                    let (lin, fixes) = harmonic_grid(g, &packed.inv_mass, h);
+                    self.fixes.extend(fixes);
+                    lin
                 }
             };
             let (cols, rows, reach) = (g.cols as usize, g.rows as usize, g.reach());

@@ -74,11 +74,12 @@ impl Integrator {
         }
     }
 
-    /// Whether the GPU's `grid_pass` steps its cloth grids whole (the Euler integrators).
+    /// Whether the GPU's `grid_pass` steps its cloth grids whole: the Euler integrators, and
+    /// the closed form (its device kernel has no exact displacement).
     pub fn runs_on_gpu_grids(self) -> bool {
         matches!(
             self,
-            Integrator::SymplecticEuler | Integrator::ExplicitEuler
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler | Integrator::Harmonic
         )
     }
 
