@@ -70,13 +70,16 @@ fn rapier_cloth(
             bend_softness: bend,
             ..Default::default()
         });
-    // rapier's cloth always has shear diagonals; ours only when the scene asks.
+    // rapier's cloth always has shear diagonals and bend edges; ours only when the scene asks.
     let diagonal = |e: &[u32; 2]| {
         let d = builder.positions[e[0] as usize] - builder.positions[e[1] as usize];
         d.dot(du).abs() > 0.0 && d.dot(dv).abs() > 0.0
     };
     if cloth.shear.is_none() {
         builder.edges.retain(|e| !diagonal(e));
+    }
+    if cloth.bend.is_none() {
+        builder.bend_edges.clear();
     }
     let shear_spec = cloth.shear.as_ref().unwrap_or(&cloth.structural);
     // Overrides index `edges` then `bend_edges`: the shear edges when their spring differs from

@@ -663,7 +663,7 @@ impl GpuSolver {
                 bytemuck::cast_slice(host_coefs),
                 U::STORAGE | U::COPY_DST,
             );
-            let mut sdv_bytes = poison(order.len() * 16);
+            let mut sdv_bytes = poison(springs_len * 16);
             sdv_bytes.resize(sdv_len * 16, 0);
             let sdv = init("sdv", &sdv_bytes, rw);
             let offsets = init("offsets", bytemuck::cast_slice(&offsets), U::STORAGE);
