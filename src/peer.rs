@@ -138,7 +138,12 @@ pub fn run_cloth(
     world.integration_parameters.num_solver_iterations = substeps;
     let handle = insert(&mut world, builder.no_surface_collider(), cloth);
     Ok(timed_run(
-        &mut world, handle, seconds, cloth, index, observe,
+        &mut world,
+        handle,
+        seconds,
+        cloth,
+        index,
+        Some(&mut { observe }),
     ))
 }
 
@@ -162,7 +167,7 @@ pub fn drape_on_ball(
         ColliderBuilder::ball(radius as f32).friction(friction as f32),
     );
     let handle = insert(&mut world, builder.particle_radius(thickness as f32), cloth);
-    Ok(timed_run(&mut world, handle, seconds, cloth, index, |_| ()))
+    Ok(timed_run(&mut world, handle, seconds, cloth, index, None))
 }
 
 /// Inserts the soft body with the cloth's initial velocity on its unpinned particles.
@@ -179,15 +184,18 @@ fn insert(world: &mut PhysicsWorld, builder: SoftBodyBuilder, cloth: &Cloth) -> 
     handle
 }
 
+/// Sees the cloth's positions (our order) after each step.
+type Observer<'a> = dyn FnMut(&[DVec3]) + 'a;
+
 /// Steps `world` through `seconds` at its own step: the soft body's positions (our order) and
-/// the wall time of the steps; `observe` sees the positions after each step, untimed.
+/// the wall time of the steps; `observe`, if any, sees the positions after each step, untimed.
 fn timed_run(
     world: &mut PhysicsWorld,
     handle: SoftBodyHandle,
     seconds: f64,
     cloth: &Cloth,
     index: impl Fn(usize, usize) -> usize,
-    mut observe: impl FnMut(&[DVec3]),
+    mut observe: Option<&mut Observer<'_>>,
 ) -> (Vec<DVec3>, f64) {
     let frames = (seconds / world.integration_parameters.dt as f64).round() as usize;
     let mut wall = 0.0;
@@ -195,7 +203,9 @@ fn timed_run(
         let t = Instant::now();
         world.step();
         wall += t.elapsed().as_secs_f64();
-        observe(&our_order(&world.soft_bodies[handle], cloth, &index));
+        if let Some(observe) = observe.as_mut() {
+            observe(&our_order(&world.soft_bodies[handle], cloth, &index));
+        }
     }
     (our_order(&world.soft_bodies[handle], cloth, &index), wall)
 }
