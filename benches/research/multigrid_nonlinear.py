@@ -3,25 +3,27 @@
 A 16x16 cloth (structural, shear and bend springs, unit masses and stiffness), flat, pinned at two
 corners, falls under gravity and swings (large rotation) for 200 h_c. Each step linearises the
 springs at the current state (Baraff-Witkin Jacobian, the geometric term clamped at zero) and
-rebuilds the Galerkin levels; the linear solve is exact or one V-cycle. RMS position error per
-particle at the end against symplectic Euler at h_c/80 (its distance to h_c/40 is printed).
-`python3 benches/research/multigrid_nonlinear.py [zeta] [gravity]` (numpy, about 2 minutes).
+rebuilds the Galerkin levels (or keeps fixed isotropic ones); the linear solve is exact or one
+V-cycle. RMS position error per particle at the end against symplectic Euler at h_c/80 (its
+distance to h_c/40 is printed).
+`python3 benches/research/multigrid_nonlinear.py [zeta] [gravity] [duration] [variant filter]`
+(numpy; about 5 minutes for every variant on an idle 2-core machine).
 """
-import numpy as np, math, sys, time
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from multigrid_prototypes import HC, Work, cloth_springs, galerkin, hierarchy, vcycle  # noqa: E402
 S = 16; n = S * S
-HC = math.pi / math.sqrt(2.0)
 zeta = float(sys.argv[1]) if len(sys.argv) > 1 else 0.2
 g = float(sys.argv[2]) if len(sys.argv) > 2 else 1e-3
 c = 2 * zeta * math.sqrt(0.5)
 pos0 = np.array([[j, i, 0.0] for i in range(S) for j in range(S)], float)
-sa, sb = [], []
-for i in range(S):
-    for j in range(S):
-        for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1), (0, 2), (2, 0)):
-            a, b = i + di, j + dj
-            if 0 <= a < S and 0 <= b < S:
-                sa.append(i * S + j); sb.append(a * S + b)
-sa, sb = np.array(sa), np.array(sb)
+sa, sb = (np.array(k) for k in zip(*((a, b) for a, b, _ in cloth_springs(S))))
 L = np.linalg.norm(pos0[sb] - pos0[sa], axis=1)
 pins = np.array([0, S - 1])
 free = np.ones(n, bool); free[pins] = False
@@ -53,41 +55,26 @@ def assemble(blocks):
 
 fd = np.repeat(free, 3)
 
-def interp1(nf):
-    nc = (nf + 1) // 2; P = np.zeros((nf, nc))
-    for f in range(nf):
-        if f % 2 == 0: P[f, f // 2] = 1
-        elif (f + 1) // 2 < nc: P[f, (f - 1) // 2] = P[f, (f + 1) // 2] = 0.5
-        else: P[f, (f - 1) // 2] = 1
-    return P
+LEVELS = hierarchy((S, S), set(np.nonzero(free)[0]), 3)
 
-# hierarchy over free dofs
-Ps = []
-fshape, ffree = (S, S), set(np.nonzero(free)[0])
-while fshape[0] * fshape[1] > 4:
-    pn = np.kron(interp1(fshape[0]), interp1(fshape[1]))
-    cs = tuple((s + 1) // 2 for s in fshape)
-    at = lambda cn, cs=cs, fs=fshape: 2 * (cn // cs[1]) * fs[1] + 2 * (cn % cs[1])
-    cfree = {cn for cn in range(cs[0] * cs[1]) if at(cn) in ffree}
-    rows = [3 * f + k for f in sorted(ffree) for k in range(3)]
-    cols = [3 * f + k for f in sorted(cfree) for k in range(3)]
-    Ps.append(np.kron(pn, np.eye(3))[np.ix_(rows, cols)])
-    fshape, ffree = cs, cfree
+ISOTROPIC = {}
 
-def vcycle(levels, l, b, smooth, w):
-    A, D = levels[l][0], levels[l][1]
-    x = np.zeros_like(b)
-    if l == len(levels) - 1:
-        for k in range(sum(smooth) + 2): x += w * (b - A @ x) / D
-        return x
-    for k in range(smooth[0]): x += w * ((b - A @ x) if k else b) / D
-    r = b - A @ x if smooth[0] else b
-    P = levels[l + 1][2]
-    x += P @ vcycle(levels, l + 1, P.T @ r, smooth, w)
-    for _ in range(smooth[1]): x += w * (b - A @ x) / D
-    return x
 
-def theta_step(x, v, h, theta, cycle):
+def isotropic_levels(h, theta, share):
+    """Coarse levels fixed for the run: the Galerkin levels of the rest state's operator with every
+    spring's block replaced by `share` of its stiffness in every direction (rotation-invariant)."""
+    key = (h, theta, share)
+    if key not in ISOTROPIC:
+        ones = np.broadcast_to(share * np.eye(3), (len(sa), 3, 3))
+        k = assemble(ones)[np.ix_(fd, fd)]
+        a = np.eye(fd.sum()) + (theta * h * c + theta * theta * h * h) * k
+        ISOTROPIC[key] = galerkin(a, LEVELS)
+    return ISOTROPIC[key]
+
+
+def theta_step(x, v, h, theta, cycle, coarse=None):
+    """One linearised theta-step; the coarse levels are the current operator's Galerkin levels,
+    or with `coarse` = share the fixed isotropic ones of `isotropic_levels`."""
     Ks, Cs = jac(x)
     K = assemble(Ks)[np.ix_(fd, fd)]; C = assemble(Cs)[np.ix_(fd, fd)]
     A = np.eye(fd.sum()) + theta * h * C + theta * theta * h * h * K
@@ -96,11 +83,11 @@ def theta_step(x, v, h, theta, cycle):
     if cycle is None:
         dv = np.linalg.solve(A, b)
     else:
-        levels = [(A, np.diag(A).copy(), None)]
-        for P in Ps:
-            Ac = P.T @ levels[-1][0] @ P
-            levels.append((Ac, np.diag(Ac).copy(), P))
-        dv = vcycle(levels, 0, b, *cycle)
+        if coarse is None:
+            levels = galerkin(A, LEVELS)
+        else:
+            levels = [(A, np.diag(A).copy(), None)] + isotropic_levels(h, theta, coarse)[1:]
+        dv = vcycle(levels, 0, b[:, None], Work(), *cycle)[:, 0]
     v1 = v.copy(); v1[free] += dv.reshape(-1, 3)
     x1 = x.copy(); x1[free] += h * (v[free] + theta * dv.reshape(-1, 3))
     return x1, v1
@@ -124,12 +111,22 @@ ref2, _ = run(se_step, HC / 80, T)
 rms = lambda a, b: math.sqrt(((a - b) ** 2).sum(axis=1).mean())
 print(f"zeta {zeta} g {g} T {T/HC:.0f} h_c; ref halving diff {rms(ref, ref2):.2e}; never moving {rms(pos0, ref2):.3f}; lowest point z = {ref2[:,2].min():.3f}", flush=True)
 ref = ref2
-for name, st in (('IE exact', lambda x, v, h: theta_step(x, v, h, 1.0, None)),
-                 ('theta0.6 exact', lambda x, v, h: theta_step(x, v, h, 0.6, None)),
-                 ('trap exact', lambda x, v, h: theta_step(x, v, h, 0.5, None)),
-                 ('theta0.6 1V pre1 w0.5', lambda x, v, h: theta_step(x, v, h, 0.6, ((1, 0), 0.5))),
-                 ('theta0.6 1V pre1post1 w0.5', lambda x, v, h: theta_step(x, v, h, 0.6, ((1, 1), 0.5))),
-                 ('IE 1V post1 w0.5', lambda x, v, h: theta_step(x, v, h, 1.0, ((0, 1), 0.5)))):
+VARIANTS = {
+    'implicit Euler, solved exactly': lambda x, v, h: theta_step(x, v, h, 1.0, None),
+    'theta = 0.6, solved exactly': lambda x, v, h: theta_step(x, v, h, 0.6, None),
+    'trapezoidal, solved exactly': lambda x, v, h: theta_step(x, v, h, 0.5, None),
+    'theta = 0.6, 1 V-cycle, 1 pre-sweep': lambda x, v, h: theta_step(x, v, h, 0.6, ((1, 0), 0.5)),
+    'theta = 0.6, 1 V-cycle, 1 pre- and 1 post-sweep':
+        lambda x, v, h: theta_step(x, v, h, 0.6, ((1, 1), 0.5)),
+    'implicit Euler, 1 V-cycle, 1 post-sweep': lambda x, v, h: theta_step(x, v, h, 1.0, ((0, 1), 0.5)),
+}
+for share in (1 / 3, 0.5, 1.0):
+    VARIANTS[f'theta = 0.6, 1 V-cycle, 1 pre- and 1 post-sweep, fixed isotropic coarse levels ({share:.2f})'] = \
+        lambda x, v, h, share=share: theta_step(x, v, h, 0.6, ((1, 1), 0.5), share)
+pick = sys.argv[4] if len(sys.argv) > 4 else ''
+for name, st in VARIANTS.items():
+    if pick not in name:
+        continue
     cells = []
     for r in (0.5, 1, 2, 4):
         x, k = run(st, r * HC, T)

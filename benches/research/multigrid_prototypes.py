@@ -40,10 +40,53 @@ def interp1(nf):
     return p
 
 
+def cloth_springs(side):
+    """(node, node, grid offset) of a side x side cloth: structural, shear and bend."""
+    out = []
+    for i in range(side):
+        for j in range(side):
+            for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1), (0, 2), (2, 0)):
+                if 0 <= i + di < side and 0 <= j + dj < side:
+                    out.append((i * side + j, (i + di) * side + j + dj, (di, dj)))
+    return out
+
+
+def aggregate1(nf):
+    """Piecewise-constant transfer: each pair of nodes is one coarse node (unsmoothed aggregation,
+    the transfer a general network gets most cheaply: its coarse level is again a spring network)."""
+    p = np.zeros((nf, (nf + 1) // 2))
+    for f in range(nf):
+        p[f, f // 2] = 1
+    return p
+
+
+def hierarchy(shape, free_nodes, dim, transfer=interp1):
+    """Transfer matrices over the free dofs, finest first, down to 4 nodes; a coarse node
+    sits on every other fine node per axis and is free when that fine node is."""
+    out = []
+    while np.prod(shape) > 4:
+        ps = [transfer(s) for s in shape]
+        pn = ps[0] if len(ps) == 1 else np.kron(ps[0], ps[1])
+        coarse = tuple((s + 1) // 2 for s in shape)
+
+        def at(cn, cs=coarse, fs=shape):
+            if len(cs) == 1:
+                return 2 * cn
+            ci, cj = divmod(cn, cs[1])
+            return 2 * ci * fs[1] + 2 * cj
+
+        coarse_free = {cn for cn in range(int(np.prod(coarse))) if at(cn) in free_nodes}
+        rows = [dim * f + c for f in sorted(free_nodes) for c in range(dim)]
+        cols = [dim * f + c for f in sorted(coarse_free) for c in range(dim)]
+        out.append(np.kron(pn, np.eye(dim))[np.ix_(rows, cols)])
+        shape, free_nodes = coarse, coarse_free
+    return out
+
+
 class System:
     """Stiffness K over the free dofs (M = I, C = c K) and the interpolation hierarchy."""
 
-    def __init__(self, kind, zeta):
+    def __init__(self, kind, zeta, transfer=interp1):
         self.kind, self.zeta, self.c = kind, zeta, 2 * zeta * math.sqrt(0.5)
         if kind == "chain":
             nodes, shape, dim, pins = 21, (21,), 1, [0]
@@ -51,14 +94,8 @@ class System:
         else:
             side = 16
             nodes, shape, dim, pins = side * side, (side, side), 2, [0, side - 1]
-            springs = []
-            for i in range(side):
-                for j in range(side):
-                    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1), (0, 2), (2, 0)):
-                        a, b = i + di, j + dj
-                        if 0 <= a < side and 0 <= b < side:
-                            d = np.array([di, dj], float) / math.hypot(di, dj)
-                            springs.append((i * side + j, a * side + b, d))
+            springs = [(a, b, np.array(d, float) / math.hypot(*d))
+                       for a, b, d in cloth_springs(side)]
         k = np.zeros((dim * nodes, dim * nodes))
         for a, b, d in springs:
             block = np.outer(d, d)
@@ -66,24 +103,7 @@ class System:
                 k[dim * p:dim * p + dim, dim * q:dim * q + dim] += w * block
         free = [i for i in range(dim * nodes) if i // dim not in pins]
         self.K, self.n, self.dim = k[np.ix_(free, free)], len(free), dim
-        self.P = []
-        fine_shape, fine_free = shape, set(range(nodes)) - set(pins)
-        while np.prod(fine_shape) > 4:
-            ps = [interp1(s) for s in fine_shape]
-            pn = ps[0] if len(ps) == 1 else np.kron(ps[0], ps[1])
-            coarse_shape = tuple((s + 1) // 2 for s in fine_shape)
-
-            def at(cn, cs=coarse_shape, fs=fine_shape):
-                if len(cs) == 1:
-                    return 2 * cn
-                ci, cj = divmod(cn, cs[1])
-                return 2 * ci * fs[1] + 2 * cj
-
-            coarse_free = {cn for cn in range(int(np.prod(coarse_shape))) if at(cn) in fine_free}
-            rows = [dim * f + c for f in sorted(fine_free) for c in range(dim)]
-            cols = [dim * f + c for f in sorted(coarse_free) for c in range(dim)]
-            self.P.append(np.kron(pn, np.eye(dim))[np.ix_(rows, cols)])
-            fine_shape, fine_free = coarse_shape, coarse_free
+        self.P = hierarchy(shape, set(range(nodes)) - set(pins), dim, transfer)
 
     def released(self):
         """A smooth stretch along the hanging direction, at rest."""
@@ -134,6 +154,15 @@ def vcycle(levels, l, b, work, smooth, weight):
     return x
 
 
+def galerkin(a, interpolations):
+    """(operator, its diagonal, the interpolation from it to the level above) per level."""
+    levels = [(a, np.diag(a).copy(), None)]
+    for p in interpolations:
+        coarse = p.T @ levels[-1][0] @ p
+        levels.append((coarse, np.diag(coarse).copy(), p))
+    return levels
+
+
 def closed_form(h, zeta):
     """The Jacobi closed form's p, q of src/integrate/harmonic.rs (omega0^2 = 2)."""
     a, wd = zeta * math.sqrt(2.0), math.sqrt(2.0 * (1 - zeta * zeta))
@@ -146,10 +175,7 @@ def theta_step(system, theta, h, cycle=None, guess=False):
     started from zero or, with `guess`, from the closed form's Jacobi impulse."""
     k, c = system.K, system.c
     a = np.eye(system.n) + (theta * h * c + theta * theta * h * h) * k
-    levels = [(a, np.diag(a).copy(), None)]
-    for p in system.P:
-        levels.append((p.T @ levels[-1][0] @ p, None, p))
-        levels[-1] = (levels[-1][0], np.diag(levels[-1][0]).copy(), p)
+    levels = galerkin(a, system.P)
     pc, qc = closed_form(h, system.zeta)
 
     def step(x, v, work):
@@ -202,7 +228,24 @@ VARIANTS = {
 }
 
 
+AGGREGATED = (
+    "theta = 0.6, 1 V-cycle, 1 pre-sweep (w = 0.5)",
+    "theta = 0.6, 1 V-cycle, 1 pre- and 1 post-sweep (w = 0.5)",
+)
+
+
 def main():
+    print("Unsmoothed aggregation instead of linear interpolation (stable at h/h_c, zeta = 0 and "
+          "0.2; errors as below):\n")
+    for kind in ("chain", "cloth"):
+        systems = {z: System(kind, z, aggregate1) for z in (0.0, 0.2)}
+        for name in AGGREGATED:
+            make = VARIANTS[name]
+            stable = ["all" if all(radius(s, make(s, p * HC)) <= 1.001 for p in POINTS) else "not all"
+                      for s in systems.values()]
+            errs = [error(systems[0.2], lambda h: make(systems[0.2], h), r)[0] for r in ERROR_AT]
+            print(f"- {kind}, {name}: stable at {stable[0]} / {stable[1]}; errors "
+                  + ", ".join(f"{e:.4f}" for e in errs), flush=True)
     for kind in ("chain", "cloth"):
         title = "chain of 20" if kind == "chain" else "cloth 16x16 (in-plane, linearised at rest)"
         print(f"\n### {title}\n")
