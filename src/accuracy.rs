@@ -110,7 +110,7 @@ pub const PEER: &str = "rapier-soft-body";
 /// it reaches 1 cm on the 128² cloth (128).
 pub const RAPIER_SUBSTEPS: [usize; 6] = [4, 8, 16, 32, 64, 128];
 
-pub const CONTENDERS: [Integrator; 8] = [
+pub const CONTENDERS: [Integrator; 9] = [
     Integrator::Harmonic,
     Integrator::HarmonicGs,
     Integrator::HarmonicSgs,
@@ -118,6 +118,7 @@ pub const CONTENDERS: [Integrator; 8] = [
     Integrator::HarmonicForcedGs,
     Integrator::SymplecticEuler,
     Integrator::ImplicitEuler,
+    Integrator::ThetaMg,
     Integrator::Xpbd,
 ];
 
@@ -142,7 +143,7 @@ pub struct Row {
 }
 
 /// Positions at `T` after `steps` steps; `None` if it blew up. Also max strain and energy drift.
-fn simulate(
+pub fn simulate(
     packed: &Packed,
     integrator: Integrator,
     g: DVec3,
@@ -280,6 +281,7 @@ fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
         }
         (None, false) => vec![30, 60, 120, 240, 480, 960, 1920, 3840],
         (None, true) if integrator == Integrator::ImplicitEuler => vec![30, 60, 120, 240],
+        (None, true) if integrator == Integrator::ThetaMg => vec![30, 60, 120, 240, 480, 960],
         (None, true) => vec![60, 240, 960, 3840],
     }
 }

@@ -15,7 +15,7 @@ use crate::statics;
 pub const RATIOS: [f64; 8] = [0.25, 0.5, 1.0, 2.0, 2.0625, 4.0, 6.0625, 8.0625];
 
 /// Integrators the suite compares (RK4 is the reference, not a contender).
-pub const CONTENDERS: [Integrator; 10] = [
+pub const CONTENDERS: [Integrator; 11] = [
     Integrator::SymplecticEuler,
     Integrator::ExplicitEuler,
     Integrator::Harmonic,
@@ -24,6 +24,7 @@ pub const CONTENDERS: [Integrator; 10] = [
     Integrator::HarmonicForcedGs,
     Integrator::HarmonicSgs,
     Integrator::ImplicitEuler,
+    Integrator::ThetaMg,
     Integrator::Xpbd,
     Integrator::HarmonicPaper,
 ];
@@ -504,7 +505,7 @@ pub fn report(opts: &Options) -> String {
         out,
         "Each cell: ours (numpy study's figure from MATH.md).\n"
     );
-    let columns: [(&str, Integrator, bool); 10] = [
+    let columns: [(&str, Integrator, bool); 11] = [
         ("symplectic Euler", Integrator::SymplecticEuler, false),
         ("harmonic (Jacobi)", Integrator::Harmonic, false),
         ("harmonic-forced", Integrator::HarmonicForced, false),
@@ -514,6 +515,7 @@ pub fn report(opts: &Options) -> String {
         ("harmonic, exact displacement", Integrator::Harmonic, true),
         ("explicit Euler", Integrator::ExplicitEuler, false),
         ("implicit-euler", Integrator::ImplicitEuler, false),
+        ("theta-mg", Integrator::ThetaMg, false),
         ("xpbd", Integrator::Xpbd, false),
     ];
     let names: Vec<&str> = columns.iter().map(|c| c.0).collect();

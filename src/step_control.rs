@@ -163,7 +163,7 @@ fn power_iteration(packed: &Packed, iterations: usize) -> f64 {
 /// stability limit.
 pub fn stable_omega_h(integrator: Integrator, zeta: f64) -> Option<f64> {
     let table: [f64; ZETAS.len()] = match integrator {
-        Integrator::ImplicitEuler | Integrator::Xpbd => return None,
+        Integrator::ImplicitEuler | Integrator::Xpbd | Integrator::ThetaMg => return None,
         Integrator::SymplecticEuler => TABLE_SE,
         Integrator::ExplicitEuler => TABLE_EE,
         Integrator::Harmonic | Integrator::HarmonicPaper => TABLE_H,

@@ -17,7 +17,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from multigrid_prototypes import HC, Work, cloth_springs, galerkin, hierarchy, vcycle  # noqa: E402
+from multigrid_prototypes import (HC, Work, cloth_springs, galerkin, hierarchy,  # noqa: E402
+                                  smoothed_aggregation, vcycle)  # noqa: E402
 S = 16; n = S * S
 zeta = float(sys.argv[1]) if len(sys.argv) > 1 else 0.2
 g = float(sys.argv[2]) if len(sys.argv) > 2 else 1e-3
@@ -56,23 +57,29 @@ def assemble(blocks):
 fd = np.repeat(free, 3)
 
 LEVELS = hierarchy((S, S), set(np.nonzero(free)[0]), 3)
+_lap = np.zeros((n, n))
+np.add.at(_lap, (sa, sa), 1)
+np.add.at(_lap, (sb, sb), 1)
+np.add.at(_lap, (sa, sb), -1)
+np.add.at(_lap, (sb, sa), -1)
+AGGREGATES = smoothed_aggregation(_lap[np.ix_(free, free)], 3)
 
 ISOTROPIC = {}
 
 
-def isotropic_levels(h, theta, share):
+def isotropic_levels(h, theta, share, transfers):
     """Coarse levels fixed for the run: the Galerkin levels of the rest state's operator with every
     spring's block replaced by `share` of its stiffness in every direction (rotation-invariant)."""
-    key = (h, theta, share)
+    key = (h, theta, share, id(transfers))
     if key not in ISOTROPIC:
         ones = np.broadcast_to(share * np.eye(3), (len(sa), 3, 3))
         k = assemble(ones)[np.ix_(fd, fd)]
         a = np.eye(fd.sum()) + (theta * h * c + theta * theta * h * h) * k
-        ISOTROPIC[key] = galerkin(a, LEVELS)
+        ISOTROPIC[key] = galerkin(a, transfers)
     return ISOTROPIC[key]
 
 
-def theta_step(x, v, h, theta, cycle, coarse=None):
+def theta_step(x, v, h, theta, cycle, coarse=None, transfers=LEVELS):
     """One linearised theta-step; the coarse levels are the current operator's Galerkin levels,
     or with `coarse` = share the fixed isotropic ones of `isotropic_levels`."""
     Ks, Cs = jac(x)
@@ -84,9 +91,9 @@ def theta_step(x, v, h, theta, cycle, coarse=None):
         dv = np.linalg.solve(A, b)
     else:
         if coarse is None:
-            levels = galerkin(A, LEVELS)
+            levels = galerkin(A, transfers)
         else:
-            levels = [(A, np.diag(A).copy(), None)] + isotropic_levels(h, theta, coarse)[1:]
+            levels = [(A, np.diag(A).copy(), None)] + isotropic_levels(h, theta, coarse, transfers)[1:]
         dv = vcycle(levels, 0, b[:, None], Work(), *cycle)[:, 0]
     v1 = v.copy(); v1[free] += dv.reshape(-1, 3)
     x1 = x.copy(); x1[free] += h * (v[free] + theta * dv.reshape(-1, 3))
@@ -123,6 +130,9 @@ VARIANTS = {
 for share in (1 / 3, 0.5, 1.0):
     VARIANTS[f'theta = 0.6, 1 V-cycle, 1 pre- and 1 post-sweep, fixed isotropic coarse levels ({share:.2f})'] = \
         lambda x, v, h, share=share: theta_step(x, v, h, 0.6, ((1, 1), 0.5), share)
+for sweeps, label in (((1, 0), '1 pre-sweep'), ((1, 1), '1 pre- and 1 post-sweep')):
+    VARIANTS[f'theta = 0.6, 1 V-cycle, {label}, fixed isotropic coarse levels (1.00), smoothed aggregation'] = \
+        lambda x, v, h, sweeps=sweeps: theta_step(x, v, h, 0.6, (sweeps, 0.5), 1.0, AGGREGATES)
 pick = sys.argv[4] if len(sys.argv) > 4 else ''
 for name, st in VARIANTS.items():
     if pick not in name:

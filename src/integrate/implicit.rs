@@ -26,17 +26,17 @@ pub const CG_MAX_ITERATIONS: usize = 4000;
 #[derive(Clone, Debug, Default)]
 pub struct Implicit {
     /// Per spring: axis and transverse factor `t`.
-    axis: Vec<(DVec3, f64)>,
+    pub(super) axis: Vec<(DVec3, f64)>,
     /// Per spring: a product's per-spring term.
-    term: Vec<DVec3>,
-    rhs: Vec<DVec3>,
-    dv: Vec<DVec3>,
+    pub(super) term: Vec<DVec3>,
+    pub(super) rhs: Vec<DVec3>,
+    pub(super) dv: Vec<DVec3>,
     r: Vec<DVec3>,
     z: Vec<DVec3>,
     p: Vec<DVec3>,
     ap: Vec<DVec3>,
     /// Jacobi preconditioner: inverse of the block diagonal's diagonal.
-    precond: Vec<DVec3>,
+    pub(super) precond: Vec<DVec3>,
     partial: Vec<f64>,
     /// CG iterations of the last step.
     pub last_iterations: usize,
@@ -64,6 +64,16 @@ impl Implicit {
     }
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
+        let degenerate = self.linearise(packed, g, h, h);
+        self.solve(packed, h);
+        self.finish(packed, h, 1.0, degenerate);
+    }
+
+    /// Linearises the springs at the current state for the system `A Δv = rhs` with
+    /// `A = M − hs D − hs² K` and `rhs = h (f + hs K v)` (`hs = h` for implicit Euler, `θ h` for a
+    /// θ-step): fills the per-spring geometry, `rhs` and the Jacobi preconditioner. Returns
+    /// whether a degenerate spring left the system.
+    pub(super) fn linearise(&mut self, packed: &Packed, g: DVec3, h: f64, hs: f64) -> bool {
         let springs = &packed.springs;
         let (x, v) = (&packed.x, &packed.v);
         let degenerate = AtomicBool::new(false);
@@ -79,7 +89,7 @@ impl Implicit {
             let dv = v[b] - v[a];
             let force = -(s.stiffness * (len - s.rest) + s.damping * nn.dot(dv)) * nn;
             let k_dv = -s.stiffness * (nn * nn.dot(dv) + t * (dv - nn * nn.dot(dv)));
-            *term = force + h * k_dv;
+            *term = force + hs * k_dv;
             if !(term.is_finite() && nn.is_finite()) {
                 // The quarantine's guard (see `integrate::guard`): a degenerate spring leaves
                 // the solve, whose dot products would carry its NaN to every particle, and
@@ -111,24 +121,28 @@ impl Implicit {
                     let s = &springs[k];
                     let (nn, t) = axis[k];
                     let nn2 = nn * nn;
-                    diag +=
-                        h * s.damping * nn2 + h * h * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
+                    diag += hs * s.damping * nn2
+                        + hs * hs * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
                 }
                 *rhs = h * f;
                 *pre = diag.recip();
             });
         }
-        self.solve(packed, h);
-        // v += Δv; x += h v.
+        degenerate.into_inner()
+    }
+
+    /// The solve's Δv (in `dv`, or `from` when given), then `v += Δv`, `x += h (v₀ + θ Δv)`; the
+    /// ends of a degenerate spring get NaN velocities for the quarantine.
+    pub(super) fn finish(&mut self, packed: &mut Packed, h: f64, theta: f64, degenerate: bool) {
         let dv = &self.dv;
         let Packed { x, v, inv_mass, .. } = packed;
         par::each2(x, v, |i, xi, vi| {
             if inv_mass[i] != 0.0 {
+                *xi += h * (*vi + theta * dv[i]);
                 *vi += dv[i];
-                *xi += h * *vi;
             }
         });
-        if degenerate.into_inner() {
+        if degenerate {
             for (s, ax) in packed.springs.iter().zip(&self.axis) {
                 if ax.0 == DVec3::ZERO {
                     for e in [s.a as usize, s.b as usize] {
@@ -142,7 +156,7 @@ impl Implicit {
     }
 
     /// Preconditioned CG on `A Δv = rhs`, starting from `Δv = 0`.
-    fn solve(&mut self, packed: &Packed, h: f64) {
+    pub(super) fn solve(&mut self, packed: &Packed, h: f64) {
         self.dv.iter_mut().for_each(|d| *d = DVec3::ZERO);
         self.r.copy_from_slice(&self.rhs);
         apply_precond(&self.precond, &self.r, &mut self.z);
@@ -177,30 +191,43 @@ impl Implicit {
 
     /// `ap = A p` without forming `A`.
     fn multiply(&mut self, packed: &Packed, h: f64) {
-        let (springs, axis, p) = (&packed.springs, &self.axis, &self.p);
-        par::each(&mut self.term, |k, out| {
-            let s = &springs[k];
-            let (nn, t) = axis[k];
-            let du = p[s.b as usize] - p[s.a as usize];
-            let along = nn * nn.dot(du);
-            *out = h * s.damping * along + h * h * s.stiffness * (along + t * (du - along));
-        });
-        let term = &self.term;
-        let inc = &packed.incidence;
-        par::each(&mut self.ap, |i, out| {
-            if packed.inv_mass[i] == 0.0 {
-                *out = DVec3::ZERO;
-                return;
-            }
-            // (A p)_b gets +B(p_b − p_a), (A p)_a gets −B(p_b − p_a).
-            let (lo, hi) = (inc.offsets[i] as usize, inc.offsets[i + 1] as usize);
-            let mut sum = packed.mass(i) * p[i];
-            for e in lo..hi {
-                sum += inc.coef[e].signum() * term[inc.spring[e] as usize];
-            }
-            *out = sum;
-        });
+        product(packed, &self.axis, &mut self.term, h, &self.p, &mut self.ap);
     }
+}
+
+/// `out = A p` without forming `A` (`A = M − hs D − hs² K` at the linearised state `axis`);
+/// `term` is per-spring scratch.
+pub(super) fn product(
+    packed: &Packed,
+    axis: &[(DVec3, f64)],
+    term: &mut [DVec3],
+    hs: f64,
+    p: &[DVec3],
+    out: &mut [DVec3],
+) {
+    let springs = &packed.springs;
+    par::each(term, |k, t_out| {
+        let s = &springs[k];
+        let (nn, t) = axis[k];
+        let du = p[s.b as usize] - p[s.a as usize];
+        let along = nn * nn.dot(du);
+        *t_out = hs * s.damping * along + hs * hs * s.stiffness * (along + t * (du - along));
+    });
+    let term = &*term;
+    let inc = &packed.incidence;
+    par::each(out, |i, o| {
+        if packed.inv_mass[i] == 0.0 {
+            *o = DVec3::ZERO;
+            return;
+        }
+        // (A p)_b gets +B(p_b − p_a), (A p)_a gets −B(p_b − p_a).
+        let (lo, hi) = (inc.offsets[i] as usize, inc.offsets[i + 1] as usize);
+        let mut sum = packed.mass(i) * p[i];
+        for e in lo..hi {
+            sum += inc.coef[e].signum() * term[inc.spring[e] as usize];
+        }
+        *o = sum;
+    });
 }
 
 fn apply_precond(pre: &[DVec3], r: &[DVec3], z: &mut [DVec3]) {

@@ -4,6 +4,7 @@ mod gauss_seidel;
 pub(crate) mod grid;
 pub mod harmonic;
 pub mod implicit;
+pub mod multigrid;
 pub mod paper;
 pub(crate) mod par;
 pub mod xpbd;
@@ -46,10 +47,13 @@ pub enum Integrator {
     ImplicitEuler,
     /// Small-step XPBD, one iteration per substep.
     Xpbd,
+    /// A θ-step (θ = 0.6) solved by one multigrid V-cycle: stable at any step, for steps far
+    /// past the explicit integrators' limits.
+    ThetaMg,
 }
 
 impl Integrator {
-    pub const ALL: [Integrator; 11] = [
+    pub const ALL: [Integrator; 12] = [
         Integrator::Harmonic,
         Integrator::HarmonicGs,
         Integrator::HarmonicSgs,
@@ -60,6 +64,7 @@ impl Integrator {
         Integrator::ExplicitEuler,
         Integrator::ImplicitEuler,
         Integrator::Xpbd,
+        Integrator::ThetaMg,
         Integrator::Rk4,
     ];
 
@@ -109,6 +114,7 @@ impl Integrator {
             Integrator::HarmonicForcedGs => "harmonic-forced-gs",
             Integrator::ImplicitEuler => "implicit-euler",
             Integrator::Xpbd => "xpbd",
+            Integrator::ThetaMg => "theta-mg",
         }
     }
 }
@@ -186,6 +192,7 @@ pub struct Solver {
     pacc: Vec<DVec3>,
     force: Vec<f64>,
     implicit: implicit::Implicit,
+    multigrid: multigrid::Multigrid,
     xpbd: xpbd::Xpbd,
     grid: grid::GridPass,
 }
@@ -208,6 +215,7 @@ impl Solver {
             pacc: Vec::new(),
             force: Vec::new(),
             implicit: implicit::Implicit::default(),
+            multigrid: multigrid::Multigrid::default(),
             xpbd: xpbd::Xpbd::default(),
             grid: grid::GridPass::default(),
         }
@@ -301,6 +309,7 @@ impl Solver {
                 self.rk = vec![vec![DVec3::ZERO; n]; 10];
             }
             Integrator::ImplicitEuler => self.implicit.resize(n, m),
+            Integrator::ThetaMg => self.multigrid.prepare(packed, h),
             Integrator::Xpbd => self.xpbd.resize(n),
             Integrator::HarmonicPaper => {
                 for (k, s) in packed.springs.iter().enumerate() {
@@ -411,6 +420,7 @@ impl Solver {
                 gauss_seidel::drift(packed, h);
             }
             Integrator::ImplicitEuler => self.implicit.step(packed, g, h),
+            Integrator::ThetaMg => self.multigrid.step(packed, g, h),
             Integrator::Xpbd => self.xpbd.step(packed, g, h),
         }
         Ok(())
