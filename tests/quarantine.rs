@@ -37,7 +37,7 @@ fn indices(sim: &Simulation) -> Vec<usize> {
     sim.quarantined().into_iter().map(|(i, _)| i).collect()
 }
 
-const EVERY: [Integrator; 9] = [
+const EVERY: [Integrator; 10] = [
     Integrator::SymplecticEuler,
     Integrator::Harmonic,
     Integrator::HarmonicGs,
@@ -45,6 +45,7 @@ const EVERY: [Integrator; 9] = [
     Integrator::HarmonicForced,
     Integrator::HarmonicForcedGs,
     Integrator::ImplicitEuler,
+    Integrator::ThetaMg,
     Integrator::Xpbd,
     Integrator::Rk4,
 ];

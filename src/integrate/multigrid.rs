@@ -238,6 +238,11 @@ pub struct Multigrid {
     ap: Vec<DVec3>,
     /// Fine inverse absolute row sums, per axis.
     inv_l1: Vec<DVec3>,
+    /// Per particle, its free body (connected by springs, touching no pin), if any; per body,
+    /// its mass and scratch for its momentum error.
+    body: Vec<Option<u32>>,
+    body_mass: Vec<f64>,
+    body_error: Vec<DVec3>,
 }
 
 impl Multigrid {
@@ -250,6 +255,7 @@ impl Multigrid {
         self.inv_l1.resize(n, DVec3::ZERO);
         self.levels.clear();
         let free: Vec<bool> = packed.inv_mass.iter().map(|&w| w != 0.0).collect();
+        self.bodies(packed, &free);
         if free.iter().filter(|&&f| f).count() <= COARSEST {
             return;
         }
@@ -312,7 +318,74 @@ impl Multigrid {
         } else {
             self.cycle(packed, hs);
         }
+        self.keep_momentum(packed);
         self.lin.finish(packed, h, THETA, degenerate);
+    }
+
+    /// Free bodies: particles joined by springs among free particles, unless a spring ties
+    /// them to a pin (a pin's force changes their momentum).
+    fn bodies(&mut self, packed: &Packed, free: &[bool]) {
+        let n = free.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        for s in &packed.springs {
+            let (a, b) = (s.a as usize, s.b as usize);
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            parent[ra.max(rb)] = ra.min(rb);
+        }
+        let mut anchored = vec![false; n];
+        for i in 0..n {
+            if !free[i] {
+                let r = root(&mut parent, i);
+                anchored[r] = true;
+            }
+        }
+        let mut id = vec![None; n];
+        self.body_mass.clear();
+        self.body = (0..n)
+            .map(|i| {
+                let r = root(&mut parent, i);
+                if !free[i] || anchored[r] {
+                    return None;
+                }
+                let b = *id[r].get_or_insert_with(|| {
+                    self.body_mass.push(0.0);
+                    self.body_mass.len() as u32 - 1
+                });
+                self.body_mass[b as usize] += packed.mass(i);
+                Some(b)
+            })
+            .collect();
+        self.body_error = vec![DVec3::ZERO; self.body_mass.len()];
+    }
+
+    /// The exact step keeps each free body's momentum (`Σ m Δv = Σ rhs`: the springs' forces
+    /// cancel); an unconverged cycle does not, so each body's error is spread over its mass.
+    fn keep_momentum(&mut self, packed: &Packed) {
+        if self.body_mass.is_empty() {
+            return;
+        }
+        self.body_error.iter_mut().for_each(|e| *e = DVec3::ZERO);
+        let lin = &mut self.lin;
+        for (i, b) in self.body.iter().enumerate() {
+            let e = lin.rhs[i] - packed.mass(i) * lin.dv[i];
+            // A particle the quarantine will stop must not spread its NaN to its body.
+            if let (Some(b), true) = (b, e.is_finite()) {
+                self.body_error[*b as usize] += e;
+            }
+        }
+        let (body, error, mass) = (&self.body, &self.body_error, &self.body_mass);
+        par::each(&mut lin.dv, |i, d| {
+            if let Some(b) = body[i] {
+                *d += error[b as usize] / mass[b as usize];
+            }
+        });
     }
 
     /// The fine level's inverse absolute row sums per axis: `m + 2 Σ_s Σ_c |B_s,·c|`, where a
