@@ -340,11 +340,9 @@ impl Multigrid {
             parent[ra.max(rb)] = ra.min(rb);
         }
         let mut anchored = vec![false; n];
-        for i in 0..n {
-            if !free[i] {
-                let r = root(&mut parent, i);
-                anchored[r] = true;
-            }
+        for (i, _) in free.iter().enumerate().filter(|(_, &f)| !f) {
+            let r = root(&mut parent, i);
+            anchored[r] = true;
         }
         let mut id = vec![None; n];
         self.body_mass.clear();
