@@ -36,7 +36,7 @@ pub struct Implicit {
     p: Vec<DVec3>,
     ap: Vec<DVec3>,
     /// Jacobi preconditioner: inverse of the block diagonal's diagonal.
-    pub(super) precond: Vec<DVec3>,
+    precond: Vec<DVec3>,
     partial: Vec<f64>,
     /// CG iterations of the last step.
     pub last_iterations: usize,
@@ -131,8 +131,8 @@ impl Implicit {
         degenerate.into_inner()
     }
 
-    /// The solve's Δv (in `dv`, or `from` when given), then `v += Δv`, `x += h (v₀ + θ Δv)`; the
-    /// ends of a degenerate spring get NaN velocities for the quarantine.
+    /// With the solved `dv`: `x += h (v₀ + θ Δv)`, `v += Δv`; the ends of a degenerate spring
+    /// get NaN velocities for the quarantine.
     pub(super) fn finish(&mut self, packed: &mut Packed, h: f64, theta: f64, degenerate: bool) {
         let dv = &self.dv;
         let Packed { x, v, inv_mass, .. } = packed;
