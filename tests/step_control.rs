@@ -1,7 +1,7 @@
 //! Automatic step control: the network frequency estimate against a closed form, and every
 //! hard case bounded at its default settings although its dt is 8.0625 h_c.
 
-use std::path::Path;
+mod common;
 
 use harmonic::buffers::Packed;
 use harmonic::prelude::*;
@@ -51,35 +51,24 @@ fn unconditionally_stable_integrators_take_one_substep() {
 
 #[test]
 fn every_hard_case_stays_bounded_with_default_settings() {
-    let mut files: Vec<_> = std::fs::read_dir(Path::new("scenes/hard"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 64);
-    for path in files {
+    for (path, max_strain, substeps) in common::hard_cases_max_strain(None) {
         let scene = Scene::load(&path).unwrap();
-        let mut sim = Simulation::from_scene(&scene).unwrap();
-        let choice = *sim
-            .step_choice()
-            .expect("hard cases leave substeps to the controller");
-        let frames = (scene.seconds.unwrap() / scene.dt).ceil() as usize;
-        let mut max_strain: f64 = 0.0;
-        for _ in 0..frames {
-            sim.step()
-                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            max_strain = max_strain.max(sim.diagnostics().max_strain);
-        }
+        assert!(
+            Simulation::from_scene(&scene)
+                .unwrap()
+                .step_choice()
+                .is_some(),
+            "{}: hard cases leave substeps to the controller",
+            path.display()
+        );
         assert!(
             max_strain < 0.5,
             "{}: max strain {max_strain}",
             path.display()
         );
         println!(
-            "{}: {} substeps, max strain {:.4}",
-            path.display(),
-            choice.substeps,
-            max_strain
+            "{}: {substeps} substeps, max strain {max_strain:.4}",
+            path.display()
         );
     }
 }

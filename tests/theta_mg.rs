@@ -2,7 +2,7 @@
 //! threshold systems and bounded on the hard cases, convergent to the fine-step reference,
 //! and less damped than implicit Euler.
 
-use std::path::Path;
+mod common;
 
 use glam::DVec3;
 use harmonic::accuracy;
@@ -29,25 +29,9 @@ fn stable_at_every_hard_case_ratio_on_the_threshold_systems() {
 
 #[test]
 fn every_hard_case_stays_bounded_in_one_step_per_frame() {
-    let mut files: Vec<_> = std::fs::read_dir(Path::new("scenes/hard"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .collect();
-    files.sort();
-    assert_eq!(files.len(), 64);
     let mut worst: f64 = 0.0;
-    for path in files {
-        let mut scene = Scene::load(&path).unwrap();
-        scene.integrator = Some("theta-mg".into());
-        let mut sim = Simulation::from_scene(&scene).unwrap();
-        assert_eq!(sim.config().substeps, 1, "{}", path.display());
-        let frames = (scene.seconds.unwrap() / scene.dt).ceil() as usize;
-        let mut max_strain: f64 = 0.0;
-        for _ in 0..frames {
-            sim.step()
-                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            max_strain = max_strain.max(sim.diagnostics().max_strain);
-        }
+    for (path, max_strain, substeps) in common::hard_cases_max_strain(Some("theta-mg")) {
+        assert_eq!(substeps, 1, "{}", path.display());
         assert!(
             max_strain.is_finite() && max_strain < stability::BLOWUP_STRAIN,
             "{}: max strain {max_strain}",

@@ -136,3 +136,33 @@ pub fn run_state(sim: &mut Simulation, frames: usize) -> Vec<DVec3> {
         .copied()
         .collect()
 }
+
+/// Every `scenes/hard/` case (64 files), sorted, with its largest strain over its full run
+/// under `integrator` (`None`: the scene's own settings) and the substeps it ran with.
+pub fn hard_cases_max_strain(integrator: Option<&str>) -> Vec<(std::path::PathBuf, f64, u32)> {
+    let mut files: Vec<_> = std::fs::read_dir("scenes/hard")
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), 64);
+    files
+        .into_iter()
+        .map(|path| {
+            let mut scene = Scene::load(&path).unwrap();
+            if let Some(name) = integrator {
+                scene.integrator = Some(name.into());
+            }
+            let mut sim = Simulation::from_scene(&scene).unwrap();
+            let substeps = sim.config().substeps;
+            let frames = (scene.seconds.unwrap() / scene.dt).ceil() as usize;
+            let mut max_strain: f64 = 0.0;
+            for _ in 0..frames {
+                sim.step()
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                max_strain = max_strain.max(sim.diagnostics().max_strain);
+            }
+            (path, max_strain, substeps)
+        })
+        .collect()
+}
