@@ -35,8 +35,8 @@ pub struct Implicit {
     z: Vec<DVec3>,
     p: Vec<DVec3>,
     ap: Vec<DVec3>,
-    /// Jacobi preconditioner: inverse of the block diagonal's diagonal.
-    precond: Vec<DVec3>,
+    /// Diagonal preconditioner (see [`Self::linearise`]).
+    pub(super) precond: Vec<DVec3>,
     partial: Vec<f64>,
     /// CG iterations of the last step.
     pub last_iterations: usize,
@@ -64,16 +64,24 @@ impl Implicit {
     }
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
-        let degenerate = self.linearise(packed, g, h, h);
+        let degenerate = self.linearise(packed, g, h, h, false);
         self.solve(packed, h);
         self.finish(packed, h, 1.0, degenerate);
     }
 
     /// Linearises the springs at the current state for the system `A Δv = rhs` with
     /// `A = M − hs D − hs² K` and `rhs = h (f + hs K v)` (`hs = h` for implicit Euler, `θ h` for a
-    /// θ-step): fills the per-spring geometry, `rhs` and the Jacobi preconditioner. Returns
-    /// whether a degenerate spring left the system.
-    pub(super) fn linearise(&mut self, packed: &Packed, g: DVec3, h: f64, hs: f64) -> bool {
+    /// θ-step): fills the per-spring geometry, `rhs` and the preconditioner: the inverse of
+    /// `A`'s diagonal, or with `l1` of its absolute row sums (l1-Jacobi). Returns whether a
+    /// degenerate spring left the system.
+    pub(super) fn linearise(
+        &mut self,
+        packed: &Packed,
+        g: DVec3,
+        h: f64,
+        hs: f64,
+        l1: bool,
+    ) -> bool {
         let springs = &packed.springs;
         let (x, v) = (&packed.x, &packed.v);
         let degenerate = AtomicBool::new(false);
@@ -120,9 +128,18 @@ impl Implicit {
                     f += sign * term[k];
                     let s = &springs[k];
                     let (nn, t) = axis[k];
-                    let nn2 = nn * nn;
-                    diag += hs * s.damping * nn2
-                        + hs * hs * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
+                    if l1 {
+                        // The spring's block is α n nᵀ + β I (α, β ≥ 0); its rows' absolute
+                        // sums are α |n| ‖n‖₁ + β, once on the diagonal block, once off it.
+                        let alpha = hs * s.damping + hs * hs * s.stiffness * (1.0 - t);
+                        let beta = hs * hs * s.stiffness * t;
+                        let a = nn.abs();
+                        diag += 2.0 * (alpha * a * (a.x + a.y + a.z) + DVec3::splat(beta));
+                    } else {
+                        let nn2 = nn * nn;
+                        diag += hs * s.damping * nn2
+                            + hs * hs * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
+                    }
                 }
                 *rhs = h * f;
                 *pre = diag.recip();

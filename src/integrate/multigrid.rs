@@ -236,8 +236,6 @@ pub struct Multigrid {
     /// Fine residual and product scratch.
     r: Vec<DVec3>,
     ap: Vec<DVec3>,
-    /// Fine inverse absolute row sums, per axis.
-    inv_l1: Vec<DVec3>,
     /// Per particle, its free body (connected by springs, touching no pin), if any; per body,
     /// its mass and scratch for its momentum error.
     body: Vec<Option<u32>>,
@@ -252,7 +250,6 @@ impl Multigrid {
         self.lin.resize(n, m);
         self.r.resize(n, DVec3::ZERO);
         self.ap.resize(n, DVec3::ZERO);
-        self.inv_l1.resize(n, DVec3::ZERO);
         self.levels.clear();
         let free: Vec<bool> = packed.inv_mass.iter().map(|&w| w != 0.0).collect();
         self.bodies(packed, &free);
@@ -312,7 +309,8 @@ impl Multigrid {
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
         let hs = THETA * h;
-        let degenerate = self.lin.linearise(packed, g, h, hs);
+        // l1 sweeps on the fine level; the same diagonal preconditions CG on small scenes.
+        let degenerate = self.lin.linearise(packed, g, h, hs, true);
         if self.levels.is_empty() {
             self.lin.solve(packed, hs);
         } else {
@@ -386,34 +384,10 @@ impl Multigrid {
         });
     }
 
-    /// The fine level's inverse absolute row sums per axis: `m + 2 Σ_s Σ_c |B_s,·c|`, where a
-    /// spring's block `B_s = α n nᵀ + β I` (α = hs c + hs² κ (1 − t), β = hs² κ t, both ≥ 0) has
-    /// row sums `α |n| ‖n‖₁ + β`.
-    fn fine_l1(&mut self, packed: &Packed, hs: f64) {
-        let (springs, axis, inc) = (&packed.springs, &self.lin.axis, &packed.incidence);
-        par::each(&mut self.inv_l1, |i, out| {
-            if packed.inv_mass[i] == 0.0 {
-                *out = DVec3::ZERO;
-                return;
-            }
-            let mut sum = DVec3::splat(packed.mass(i));
-            for e in inc.offsets[i] as usize..inc.offsets[i + 1] as usize {
-                let k = inc.spring[e] as usize;
-                let (s, (nn, t)) = (&springs[k], axis[k]);
-                let alpha = hs * s.damping + hs * hs * s.stiffness * (1.0 - t);
-                let beta = hs * hs * s.stiffness * t;
-                let a = nn.abs();
-                sum += 2.0 * (alpha * a * (a.x + a.y + a.z) + DVec3::splat(beta));
-            }
-            *out = sum.recip();
-        });
-    }
-
     /// One V-cycle on the fine system, into `lin.dv`.
     fn cycle(&mut self, packed: &Packed, hs: f64) {
-        self.fine_l1(packed, hs);
         let lin = &mut self.lin;
-        let (rhs, pre) = (&lin.rhs, &self.inv_l1);
+        let (rhs, pre) = (&lin.rhs, &lin.precond);
         par::each(&mut lin.dv, |i, d| *d = rhs[i] * pre[i]);
         residual(packed, lin, hs, &mut self.ap, &mut self.r);
         let first = &mut self.levels[0];
@@ -451,7 +425,7 @@ impl Multigrid {
         let r = &self.r;
         par::each(&mut lin.dv, |i, d| *d += r[i]);
         residual(packed, lin, hs, &mut self.ap, &mut self.r);
-        let (r, pre) = (&self.r, &self.inv_l1);
+        let (r, pre) = (&self.r, &lin.precond);
         par::each(&mut lin.dv, |i, d| *d += r[i] * pre[i]);
     }
 }
