@@ -315,25 +315,81 @@ pub struct Reference {
     pub settled: f64,
 }
 
-/// Runs every case; `progress` is told after each run (done, total, label).
+/// What a bench run covers; the default is everything.
+#[derive(Clone, Debug, Default)]
+pub struct Selection {
+    /// Scene names (empty: all of [`cases`]).
+    pub scenes: Vec<String>,
+    /// Integrators (empty: all of [`CONTENDERS`], and rapier's cloth when built in).
+    pub integrators: Vec<Integrator>,
+    /// Step counts per simulated second instead of each integrator's ladder (empty: ladders).
+    pub steps: Vec<u64>,
+}
+
+impl Selection {
+    /// Checks the scene names against the cases the bench knows.
+    pub fn validate(&self, quick: bool) -> Result<(), String> {
+        let known: Vec<&str> = cases(quick).iter().map(|c| c.name).collect();
+        for s in &self.scenes {
+            if !known.contains(&s.as_str()) {
+                let note = if quick {
+                    " (--quick leaves out cloth128)"
+                } else {
+                    ""
+                };
+                return Err(format!(
+                    "--scenes {s}: the bench's scenes are {}{note}",
+                    known.join(", ")
+                ));
+            }
+        }
+        if self.steps.contains(&0) {
+            return Err("--steps: step counts must be ≥ 1".into());
+        }
+        Ok(())
+    }
+
+    fn integrators(&self) -> Vec<Integrator> {
+        if self.integrators.is_empty() {
+            CONTENDERS.to_vec()
+        } else {
+            self.integrators.clone()
+        }
+    }
+}
+
+/// Runs every selected case; `progress` is told after each run (done, total, label).
 pub fn measure(
     quick: bool,
     repeats: u32,
+    selection: &Selection,
     mut progress: impl FnMut(usize, usize, &str),
 ) -> (Vec<Row>, Vec<Reference>) {
-    let cases = cases(quick);
+    let cases: Vec<Case> = cases(quick)
+        .into_iter()
+        .filter(|c| selection.scenes.is_empty() || selection.scenes.iter().any(|s| s == c.name))
+        .collect();
+    let contenders = selection.integrators();
     let plan: Vec<(usize, Integrator, u64)> = cases
         .iter()
         .enumerate()
         .flat_map(|(ci, case)| {
             let p = Packed::gather(&case.scene.build().world).expect("bench scenes are consistent");
-            CONTENDERS
+            contenders
                 .iter()
-                .flat_map(move |&i| ladder(&p, i).into_iter().map(move |n| (ci, i, n)))
+                .flat_map(|&i| {
+                    let steps = if selection.steps.is_empty() {
+                        ladder(&p, i)
+                    } else {
+                        selection.steps.clone()
+                    };
+                    steps.into_iter().map(move |n| (ci, i, n))
+                })
                 .collect::<Vec<_>>()
         })
         .collect();
-    let peer_runs = if cfg!(feature = "rapier") {
+    let with_peer = cfg!(feature = "rapier") && selection.integrators.is_empty();
+    let peer_runs = if with_peer {
         cases.iter().filter(|c| !c.scene.cloths.is_empty()).count() * RAPIER_SUBSTEPS.len()
     } else {
         0
@@ -403,7 +459,7 @@ pub fn measure(
             rows.push(runner.run(integrator, steps, ladder_repeats));
             done += 1;
         }
-        for integrator in CONTENDERS {
+        for &integrator in &contenders {
             let ladder: Vec<&Row> = rows
                 .iter()
                 .filter(|r| r.scene == case.name && r.integrator == integrator.name())
@@ -453,11 +509,11 @@ pub fn measure(
             .position(|r| r.scene == case.name)
             .unwrap_or(rows.len());
         rows[first..].sort_by_key(|r| {
-            let k = CONTENDERS.iter().position(|i| i.name() == r.integrator);
+            let k = contenders.iter().position(|i| i.name() == r.integrator);
             (k, r.steps)
         });
         #[cfg(feature = "rapier")]
-        if let Some(cloth) = case.scene.cloths.first() {
+        if let (true, Some(cloth)) = (with_peer, case.scene.cloths.first()) {
             for substeps in RAPIER_SUBSTEPS {
                 progress(
                     done,

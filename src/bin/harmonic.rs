@@ -56,6 +56,15 @@ enum Command {
         repeats: u32,
         #[arg(long, default_value = "bench-out")]
         out: PathBuf,
+        /// Only these scenes (chain20, cloth16, cloth128; default: all).
+        #[arg(long, value_delimiter = ',')]
+        scenes: Vec<String>,
+        /// Only these integrators (default: every contender and rapier's cloth).
+        #[arg(long, value_delimiter = ',')]
+        integrators: Vec<String>,
+        /// These steps per simulated second instead of each integrator's ladder.
+        #[arg(long, value_delimiter = ',')]
+        steps: Vec<u64>,
         /// `gpu`: instead, GPU substeps/s against cloth size beside the CPU kernel, against the
         /// memory-bound floor, and what each shader specialisation buys (writes gpu.md).
         #[arg(long, default_value = "cpu")]
@@ -216,12 +225,30 @@ fn main() -> ExitCode {
             quick,
             repeats,
             out,
+            scenes,
+            integrators,
+            steps,
             backend,
             sizes,
             cpu_max,
             integrator,
         } => match backend.as_str() {
-            "cpu" => bench_report(quick, repeats, &out),
+            "cpu" => {
+                let chosen = if integrators.is_empty() {
+                    Ok(Vec::new())
+                } else {
+                    parse_integrators(&integrators)
+                };
+                chosen.and_then(|integrators| {
+                    let selection = harmonic::accuracy::Selection {
+                        scenes,
+                        integrators,
+                        steps,
+                    };
+                    selection.validate(quick)?;
+                    bench_report(quick, repeats, &selection, &out)
+                })
+            }
             "gpu" => gpu_bench(&sizes, &integrator, repeats, cpu_max, &out),
             other => Err(format!("--backend {other}: the bench runs `cpu` or `gpu`")),
         },
@@ -384,11 +411,16 @@ fn render(_: RenderArgs) -> Result<(), String> {
     Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
-fn bench_report(quick: bool, repeats: u32, out: &std::path::Path) -> Result<(), String> {
+fn bench_report(
+    quick: bool,
+    repeats: u32,
+    selection: &harmonic::accuracy::Selection,
+    out: &std::path::Path,
+) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let bar = progress_bar(1);
     let (rows, refs) =
-        harmonic::accuracy::measure(quick, repeats, |done, total, label| match &bar {
+        harmonic::accuracy::measure(quick, repeats, selection, |done, total, label| match &bar {
             Some(b) => {
                 b.set_length(total as u64);
                 b.set_position(done as u64);
