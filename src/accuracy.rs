@@ -306,6 +306,8 @@ pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64, f64) {
 #[derive(Clone, Debug)]
 pub struct Reference {
     pub scene: &'static str,
+    /// The stiffness factor of [`Selection::stiffen`] (1: the scene as it is).
+    pub stiffen: f64,
     pub steps: u64,
     pub change: f64,
     pub max_strain: f64,
@@ -324,6 +326,9 @@ pub struct Selection {
     pub integrators: Vec<Integrator>,
     /// Step counts per simulated second instead of each integrator's ladder (empty: ladders).
     pub steps: Vec<u64>,
+    /// Every spring's stiffness times this, damping ratios kept (None: the scenes as they are):
+    /// where a stiffer scene moves the balance between small and large steps.
+    pub stiffen: Option<f64>,
 }
 
 impl Selection {
@@ -346,7 +351,12 @@ impl Selection {
         if self.steps.contains(&0) {
             return Err("--steps: step counts must be ≥ 1".into());
         }
-        Ok(())
+        match self.stiffen {
+            Some(f) if !(f.is_finite() && f > 0.0) => {
+                Err(format!("--stiffen {f}: expected a finite factor > 0"))
+            }
+            _ => Ok(()),
+        }
     }
 
     fn integrators(&self) -> Vec<Integrator> {
@@ -356,6 +366,25 @@ impl Selection {
             self.integrators.clone()
         }
     }
+}
+
+/// `scene` with every spring's stiffness times `factor` (damping ratios, and so ζ, kept).
+pub fn stiffened(mut scene: Scene, factor: f64) -> Scene {
+    let mut scale = |spec: &mut SpringSpec| {
+        if let Some(k) = spec.stiffness.as_mut() {
+            *k *= factor;
+        }
+    };
+    for c in &mut scene.cloths {
+        scale(&mut c.structural);
+        c.shear.iter_mut().for_each(&mut scale);
+        c.bend.iter_mut().for_each(&mut scale);
+    }
+    for r in &mut scene.ropes {
+        scale(&mut r.spring);
+        r.bend.iter_mut().for_each(&mut scale);
+    }
+    scene
 }
 
 /// Runs every selected case; `progress` is told after each run (done, total, label).
@@ -368,6 +397,10 @@ pub fn measure(
     let cases: Vec<Case> = cases(quick)
         .into_iter()
         .filter(|c| selection.scenes.is_empty() || selection.scenes.iter().any(|s| s == c.name))
+        .map(|c| Case {
+            name: c.name,
+            scene: stiffened(c.scene, selection.stiffen.unwrap_or(1.0)),
+        })
         .collect();
     let contenders = selection.integrators();
     let plan: Vec<(usize, Integrator, u64)> = cases
@@ -420,6 +453,7 @@ pub fn measure(
         let static_strain = statics::static_strain(&packed, &relaxed);
         refs.push(Reference {
             scene: case.name,
+            stiffen: selection.stiffen.unwrap_or(1.0),
             steps,
             change,
             max_strain,
@@ -651,7 +685,11 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
             .filter(|r| r.scene == scene && r.stable)
             .map(|r| r.rms_error)
             .fold(f64::INFINITY, f64::min);
-        let _ = writeln!(out, "### {scene}\n");
+        if reference.stiffen == 1.0 {
+            let _ = writeln!(out, "### {scene}\n");
+        } else {
+            let _ = writeln!(out, "### {scene}, every stiffness ×{}\n", reference.stiffen);
+        }
         let _ = writeln!(
             out,
             "Reference: RK4 at {} steps/s, max strain {:.4}; halving its step moves it by {:.2e} m RMS, {:.2}% of the smallest error below.\n",

@@ -65,6 +65,9 @@ enum Command {
         /// These steps per simulated second instead of each integrator's ladder.
         #[arg(long, value_delimiter = ',')]
         steps: Vec<u64>,
+        /// Every spring's stiffness times this factor (damping ratios kept).
+        #[arg(long)]
+        stiffen: Option<f64>,
         /// `gpu`: instead, GPU substeps/s against cloth size beside the CPU kernel, against the
         /// memory-bound floor, and what each shader specialisation buys (writes gpu.md).
         #[arg(long, default_value = "cpu")]
@@ -228,6 +231,7 @@ fn main() -> ExitCode {
             scenes,
             integrators,
             steps,
+            stiffen,
             backend,
             sizes,
             cpu_max,
@@ -244,6 +248,7 @@ fn main() -> ExitCode {
                         scenes,
                         integrators,
                         steps,
+                        stiffen,
                     };
                     selection.validate(quick)?;
                     bench_report(quick, repeats, &selection, &out)
