@@ -704,6 +704,12 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
             "Baselines: never moving scores {:.3e} m RMS, the static equilibrium {:.3e} m.\n",
             reference.still, reference.settled
         );
+        if reference.still <= RULE_ERROR {
+            let _ = writeln!(
+                out,
+                "**Never moving is within 1 cm here: the rule cannot tell a run from one that stood still, and this scene's ratios say nothing.**\n"
+            );
+        }
         match fastest_within(
             rows.iter().filter(|r| r.scene == scene),
             reference.max_strain,
@@ -974,6 +980,23 @@ mod tests {
         let close = [row(10, false, f64::NAN, f64::NAN), row(11, true, 0.0, 0.5)];
         let refs: Vec<&Row> = close.iter().collect();
         assert_eq!(edge_bracket(&refs, 0.5), None);
+    }
+
+    #[test]
+    fn the_report_says_when_standing_still_passes_the_rule() {
+        let reference = |still: f64| Reference {
+            scene: "s",
+            stiffen: 1.0,
+            steps: 1000,
+            change: 1e-9,
+            max_strain: 0.5,
+            still,
+            settled: still,
+        };
+        let rows = [row(100, true, 0.001, 0.5)];
+        let warning = "rule cannot tell a run from one that stood still";
+        assert!(markdown(&rows, &[reference(0.005)]).contains(warning));
+        assert!(!markdown(&rows, &[reference(0.05)]).contains(warning));
     }
 
     #[test]
