@@ -1000,6 +1000,26 @@ mod tests {
     }
 
     #[test]
+    fn stiffening_scales_every_spring_and_keeps_its_damping_ratio() {
+        for scene in [swinging_cloth(4, 500.0, THROW), swinging_chain()] {
+            let packed = |s: Scene| Packed::gather(&s.build().world).expect("bench scene");
+            let base = packed(scene.clone());
+            let stiff = packed(stiffened(scene, 100.0));
+            assert_eq!(base.springs.len(), stiff.springs.len());
+            for (a, b) in base.springs.iter().zip(&stiff.springs) {
+                assert!(
+                    (b.stiffness / a.stiffness - 100.0).abs() < 1e-9,
+                    "{a:?} {b:?}"
+                );
+                assert!((b.zeta() - a.zeta()).abs() < 1e-12, "{a:?} {b:?}");
+            }
+            // h_c = π/ω0 with ω0 ∝ √κ.
+            let ratio = stability::h_crit(&base) / stability::h_crit(&stiff);
+            assert!((ratio - 10.0).abs() < 1e-9, "{ratio}");
+        }
+    }
+
+    #[test]
     fn bisections_narrow_a_bracket_to_the_resolution() {
         assert_eq!(bisections_to_resolve(200, 400), 4);
         assert_eq!(bisections_to_resolve(60, 240), 5);
