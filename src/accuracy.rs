@@ -81,8 +81,26 @@ pub fn swinging_chain() -> Scene {
     s
 }
 
+/// A horizontal `n`×`n` cloth, 1 m and 1 kg, pinned at two corners of one edge and released
+/// at rest: it falls and swings down like a dropped curtain, out of its plane. Run only when
+/// named (`--scenes drop16`), for the stiffer-scenes study: a stiff cloth that still moves.
+pub fn dropped_cloth(n: u32, stiffness: f64) -> Scene {
+    let mut s = swinging_cloth(n, stiffness, 0.0);
+    s.cloths[0].plane = Plane::Horizontal;
+    s.cloths[0].origin = [-0.5, 1.0, 0.0];
+    s
+}
+
 /// Sideways throw of the bench cloths (m/s).
 pub const THROW: f64 = 2.0;
+
+/// Scenes the bench runs only when `--scenes` names them.
+pub fn extra_cases() -> Vec<Case> {
+    vec![Case {
+        name: "drop16",
+        scene: dropped_cloth(16, 500.0),
+    }]
+}
 
 pub fn cases(quick: bool) -> Vec<Case> {
     let mut v = vec![
@@ -320,7 +338,7 @@ pub struct Reference {
 /// What a bench run covers; the default is everything.
 #[derive(Clone, Debug, Default)]
 pub struct Selection {
-    /// Scene names (empty: all of [`cases`]).
+    /// Scene names (empty: all of [`cases`]; [`extra_cases`] run only when named).
     pub scenes: Vec<String>,
     /// Integrators (empty: all of [`CONTENDERS`], and rapier's cloth when built in).
     pub integrators: Vec<Integrator>,
@@ -335,16 +353,18 @@ impl Selection {
     /// Checks the scene names against the cases the bench knows.
     pub fn validate(&self, quick: bool) -> Result<(), String> {
         let known: Vec<&str> = cases(quick).iter().map(|c| c.name).collect();
+        let extra: Vec<&str> = extra_cases().iter().map(|c| c.name).collect();
         for s in &self.scenes {
-            if !known.contains(&s.as_str()) {
+            if !known.contains(&s.as_str()) && !extra.contains(&s.as_str()) {
                 let note = if quick {
                     " (--quick leaves out cloth128)"
                 } else {
                     ""
                 };
                 return Err(format!(
-                    "--scenes {s}: the bench's scenes are {}{note}",
-                    known.join(", ")
+                    "--scenes {s}: the bench's scenes are {}{note}, and by name only {}",
+                    known.join(", "),
+                    extra.join(", ")
                 ));
             }
         }
@@ -394,9 +414,11 @@ pub fn measure(
     selection: &Selection,
     mut progress: impl FnMut(usize, usize, &str),
 ) -> (Vec<Row>, Vec<Reference>) {
+    let named = |c: &Case| selection.scenes.iter().any(|s| s == c.name);
     let cases: Vec<Case> = cases(quick)
         .into_iter()
-        .filter(|c| selection.scenes.is_empty() || selection.scenes.iter().any(|s| s == c.name))
+        .filter(|c| selection.scenes.is_empty() || named(c))
+        .chain(extra_cases().into_iter().filter(named))
         .map(|c| Case {
             name: c.name,
             scene: stiffened(c.scene, selection.stiffen.unwrap_or(1.0)),
@@ -1017,6 +1039,19 @@ mod tests {
             let ratio = stability::h_crit(&base) / stability::h_crit(&stiff);
             assert!((ratio - 10.0).abs() < 1e-9, "{ratio}");
         }
+    }
+
+    #[test]
+    fn a_scene_run_only_by_name_is_accepted_by_name() {
+        let named = |name: &str| Selection {
+            scenes: vec![name.into()],
+            ..Default::default()
+        };
+        assert!(named("drop16").validate(true).is_ok());
+        let err = named("drop17").validate(true).unwrap_err();
+        assert!(err.contains("by name only drop16"), "{err}");
+        // The default report leaves it out.
+        assert!(cases(false).iter().all(|c| c.name != "drop16"));
     }
 
     #[test]
