@@ -83,7 +83,7 @@ pub fn swinging_chain() -> Scene {
 
 /// A horizontal `n`×`n` cloth, 1 m and 1 kg, pinned at two corners of one edge and released
 /// at rest: it falls and swings down like a dropped curtain, out of its plane. Run only when
-/// named (`--scenes drop16`), for the stiffer-scenes study: a stiff cloth that still moves.
+/// named (`--scenes drop16,drop32`), for the stiffer-scenes study: a stiff cloth that still moves.
 pub fn dropped_cloth(n: u32, stiffness: f64) -> Scene {
     let mut s = swinging_cloth(n, stiffness, 0.0);
     s.cloths[0].plane = Plane::Horizontal;
@@ -96,10 +96,16 @@ pub const THROW: f64 = 2.0;
 
 /// Scenes the bench runs only when `--scenes` names them.
 pub fn extra_cases() -> Vec<Case> {
-    vec![Case {
-        name: "drop16",
-        scene: dropped_cloth(16, 500.0),
-    }]
+    vec![
+        Case {
+            name: "drop16",
+            scene: dropped_cloth(16, 500.0),
+        },
+        Case {
+            name: "drop32",
+            scene: dropped_cloth(32, 1000.0),
+        },
+    ]
 }
 
 pub fn cases(quick: bool) -> Vec<Case> {

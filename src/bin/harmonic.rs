@@ -56,7 +56,7 @@ enum Command {
         repeats: u32,
         #[arg(long, default_value = "bench-out")]
         out: PathBuf,
-        /// Only these scenes (chain20, cloth16, cloth128, and drop16 by name only; default: the first three).
+        /// Only these scenes (chain20, cloth16, cloth128; drop16 and drop32 by name only; default: the first three).
         #[arg(long, value_delimiter = ',')]
         scenes: Vec<String>,
         /// Only these integrators (default: every contender and rapier's cloth).
