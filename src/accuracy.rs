@@ -87,7 +87,6 @@ pub fn swinging_chain() -> Scene {
 pub fn dropped_cloth(n: u32, stiffness: f64) -> Scene {
     let mut s = swinging_cloth(n, stiffness, 0.0);
     s.cloths[0].plane = Plane::Horizontal;
-    s.cloths[0].origin = [-0.5, 1.0, 0.0];
     s
 }
 
