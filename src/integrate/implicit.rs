@@ -22,11 +22,31 @@ pub const CG_TOLERANCE: f64 = 1e-5;
 /// there).
 pub const CG_MAX_ITERATIONS: usize = 4000;
 
+/// One spring's block of the linearised system, `B_s = α n nᵀ + β I` with
+/// `α = hs c + hs² κ (1 − t)` and `β = hs² κ t`, and its ends: all a product reads of a spring,
+/// in one record (the products are most of a step, and bound by what they read).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Block {
+    pub(super) a: u32,
+    pub(super) b: u32,
+    pub(super) n: DVec3,
+    pub(super) alpha: f64,
+    pub(super) beta: f64,
+}
+
+impl Block {
+    /// `B_s u`.
+    #[inline(always)]
+    fn apply(&self, u: DVec3) -> DVec3 {
+        self.alpha * self.n.dot(u) * self.n + self.beta * u
+    }
+}
+
 /// Scratch for one implicit step, sized at prepare.
 #[derive(Clone, Debug, Default)]
 pub struct Implicit {
-    /// Per spring: axis and transverse factor `t`.
-    pub(super) axis: Vec<(DVec3, f64)>,
+    /// Per spring: its block at the current state (zero for a degenerate spring).
+    pub(super) block: Vec<Block>,
     /// Per spring: a product's per-spring term.
     pub(super) term: Vec<DVec3>,
     pub(super) rhs: Vec<DVec3>,
@@ -47,7 +67,7 @@ const DOT_CHUNK: usize = 2048;
 
 impl Implicit {
     pub fn resize(&mut self, n: usize, m: usize) {
-        self.axis.resize(m, (DVec3::ZERO, 0.0));
+        self.block.resize(m, Block::default());
         self.term.resize(m, DVec3::ZERO);
         for v in [
             &mut self.rhs,
@@ -65,7 +85,7 @@ impl Implicit {
 
     pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
         let degenerate = self.linearise(packed, g, h, h, false);
-        self.solve(packed, h);
+        self.solve(packed);
         self.finish(packed, h, 1.0, degenerate);
     }
 
@@ -86,14 +106,22 @@ impl Implicit {
         let (x, v) = (&packed.x, &packed.v);
         let degenerate = AtomicBool::new(false);
         // Geometry, and per spring the force term `f_s + h K_s (v_b − v_a)` acting on b.
-        par::each2(&mut self.axis, &mut self.term, |k, ax, term| {
+        par::each2(&mut self.block, &mut self.term, |k, blk, term| {
             let s = &springs[k];
             let (a, b) = (s.a as usize, s.b as usize);
             let d = x[b] - x[a];
             let len = d.length();
-            let nn = d / len;
-            let t = (1.0 - s.rest / len).max(0.0);
-            *ax = (nn, t);
+            // One division, not four.
+            let inv = 1.0 / len;
+            let nn = d * inv;
+            let t = (1.0 - s.rest * inv).max(0.0);
+            *blk = Block {
+                a: s.a,
+                b: s.b,
+                n: nn,
+                alpha: hs * s.damping + hs * hs * s.stiffness * (1.0 - t),
+                beta: hs * hs * s.stiffness * t,
+            };
             let dv = v[b] - v[a];
             let force = -(s.stiffness * (len - s.rest) + s.damping * nn.dot(dv)) * nn;
             let k_dv = -s.stiffness * (nn * nn.dot(dv) + t * (dv - nn * nn.dot(dv)));
@@ -102,14 +130,18 @@ impl Implicit {
                 // The quarantine's guard (see `integrate::guard`): a degenerate spring leaves
                 // the solve, whose dot products would carry its NaN to every particle, and
                 // only its ends are marked, below.
-                *ax = (DVec3::ZERO, 0.0);
+                *blk = Block {
+                    a: s.a,
+                    b: s.b,
+                    ..Block::default()
+                };
                 *term = DVec3::ZERO;
                 degenerate.store(true, Ordering::Relaxed);
             }
         });
         // rhs = h (m g + Σ ±term); preconditioner = 1 / diag(M + Σ B_s).
         {
-            let (axis, term) = (&self.axis, &self.term);
+            let (block, term) = (&self.block, &self.term);
             par::each2(&mut self.rhs, &mut self.precond, |i, rhs, pre| {
                 if packed.inv_mass[i] == 0.0 {
                     *rhs = DVec3::ZERO;
@@ -126,20 +158,15 @@ impl Implicit {
                     let k = packed.incidence.spring[e] as usize;
                     let sign = packed.incidence.coef[e].signum();
                     f += sign * term[k];
-                    let s = &springs[k];
-                    let (nn, t) = axis[k];
-                    if l1 {
-                        // The spring's block is α n nᵀ + β I (α, β ≥ 0); its rows' absolute
-                        // sums are α |n| ‖n‖₁ + β, once on the diagonal block, once off it.
-                        let alpha = hs * s.damping + hs * hs * s.stiffness * (1.0 - t);
-                        let beta = hs * hs * s.stiffness * t;
-                        let a = nn.abs();
-                        diag += 2.0 * (alpha * a * (a.x + a.y + a.z) + DVec3::splat(beta));
+                    let Block { n, alpha, beta, .. } = block[k];
+                    diag += if l1 {
+                        // The block is α n nᵀ + β I (α, β ≥ 0); its rows' absolute sums are
+                        // α |n| ‖n‖₁ + β, once on the diagonal block, once off it.
+                        let a = n.abs();
+                        2.0 * (alpha * a * (a.x + a.y + a.z) + DVec3::splat(beta))
                     } else {
-                        let nn2 = nn * nn;
-                        diag += hs * s.damping * nn2
-                            + hs * hs * s.stiffness * (nn2 + t * (DVec3::ONE - nn2));
-                    }
+                        alpha * n * n + DVec3::splat(beta)
+                    };
                 }
                 *rhs = h * f;
                 *pre = diag.recip();
@@ -160,9 +187,9 @@ impl Implicit {
             }
         });
         if degenerate {
-            for (s, ax) in packed.springs.iter().zip(&self.axis) {
-                if ax.0 == DVec3::ZERO {
-                    for e in [s.a as usize, s.b as usize] {
+            for blk in &self.block {
+                if blk.n == DVec3::ZERO {
+                    for e in [blk.a as usize, blk.b as usize] {
                         if inv_mass[e] != 0.0 {
                             v[e] = DVec3::NAN;
                         }
@@ -173,7 +200,7 @@ impl Implicit {
     }
 
     /// Preconditioned CG on `A Δv = rhs`, starting from `Δv = 0`.
-    pub(super) fn solve(&mut self, packed: &Packed, h: f64) {
+    pub(super) fn solve(&mut self, packed: &Packed) {
         self.dv.iter_mut().for_each(|d| *d = DVec3::ZERO);
         self.r.copy_from_slice(&self.rhs);
         apply_precond(&self.precond, &self.r, &mut self.z);
@@ -185,7 +212,7 @@ impl Implicit {
             return;
         }
         for it in 1..=CG_MAX_ITERATIONS {
-            self.multiply(packed, h);
+            self.multiply(packed);
             let pap = dot(&self.p, &self.ap, &mut self.partial);
             if pap <= 0.0 || !pap.is_finite() {
                 break;
@@ -207,28 +234,23 @@ impl Implicit {
     }
 
     /// `ap = A p` without forming `A`.
-    fn multiply(&mut self, packed: &Packed, h: f64) {
-        product(packed, &self.axis, &mut self.term, h, &self.p, &mut self.ap);
+    fn multiply(&mut self, packed: &Packed) {
+        product(packed, &self.block, &mut self.term, &self.p, &mut self.ap);
     }
 }
 
-/// `out = A p` without forming `A` (`A = M − hs D − hs² K` at the linearised state `axis`);
+/// `out = A p` without forming `A` (`A = M − hs D − hs² K` at the linearised state, `block`);
 /// `term` is per-spring scratch.
 pub(super) fn product(
     packed: &Packed,
-    axis: &[(DVec3, f64)],
+    block: &[Block],
     term: &mut [DVec3],
-    hs: f64,
     p: &[DVec3],
     out: &mut [DVec3],
 ) {
-    let springs = &packed.springs;
     par::each(term, |k, t_out| {
-        let s = &springs[k];
-        let (nn, t) = axis[k];
-        let du = p[s.b as usize] - p[s.a as usize];
-        let along = nn * nn.dot(du);
-        *t_out = hs * s.damping * along + hs * hs * s.stiffness * (along + t * (du - along));
+        let blk = &block[k];
+        *t_out = blk.apply(p[blk.b as usize] - p[blk.a as usize]);
     });
     let term = &*term;
     let inc = &packed.incidence;

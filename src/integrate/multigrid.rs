@@ -312,9 +312,9 @@ impl Multigrid {
         // l1 sweeps on the fine level; the same diagonal preconditions CG on small scenes.
         let degenerate = self.lin.linearise(packed, g, h, hs, true);
         if self.levels.is_empty() {
-            self.lin.solve(packed, hs);
+            self.lin.solve(packed);
         } else {
-            self.cycle(packed, hs);
+            self.cycle(packed);
         }
         self.keep_momentum(packed);
         self.lin.finish(packed, h, THETA, degenerate);
@@ -385,11 +385,11 @@ impl Multigrid {
     }
 
     /// One V-cycle on the fine system, into `lin.dv`.
-    fn cycle(&mut self, packed: &Packed, hs: f64) {
+    fn cycle(&mut self, packed: &Packed) {
         let lin = &mut self.lin;
         let (rhs, pre) = (&lin.rhs, &lin.precond);
         par::each(&mut lin.dv, |i, d| *d = rhs[i] * pre[i]);
-        residual(packed, lin, hs, &mut self.ap, &mut self.r);
+        residual(packed, lin, &mut self.ap, &mut self.r);
         let first = &mut self.levels[0];
         first.down.apply(&self.r, &mut first.b);
         let last = self.levels.len() - 1;
@@ -424,15 +424,15 @@ impl Multigrid {
         first.up.apply(&first.x, &mut self.r);
         let r = &self.r;
         par::each(&mut lin.dv, |i, d| *d += r[i]);
-        residual(packed, lin, hs, &mut self.ap, &mut self.r);
+        residual(packed, lin, &mut self.ap, &mut self.r);
         let (r, pre) = (&self.r, &lin.precond);
         par::each(&mut lin.dv, |i, d| *d += r[i] * pre[i]);
     }
 }
 
 /// `r = rhs − A Δv` on the fine level (0 at pinned particles).
-fn residual(packed: &Packed, lin: &mut Implicit, hs: f64, ap: &mut [DVec3], r: &mut [DVec3]) {
-    implicit::product(packed, &lin.axis, &mut lin.term, hs, &lin.dv, ap);
+fn residual(packed: &Packed, lin: &mut Implicit, ap: &mut [DVec3], r: &mut [DVec3]) {
+    implicit::product(packed, &lin.block, &mut lin.term, &lin.dv, ap);
     let rhs = &lin.rhs;
     let ap = &*ap;
     par::each(r, |i, ri| {
