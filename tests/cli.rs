@@ -121,6 +121,36 @@ fn overrides_apply() {
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown integrator `leapfrog`"));
 }
 
+/// At one substep per frame one of the hanging cloth's springs sits at 2 h_c: the closed
+/// form's impulse vanishes there, and the run says so, but only for the closed form.
+#[test]
+fn the_aliasing_warning_is_for_the_closed_form_only() {
+    let warns = |integrator: &str| {
+        let out = harmonic(&[
+            "run",
+            "scenes/hanging_cloth.ron",
+            "--steps",
+            "1",
+            "--substeps",
+            "1",
+            "--integrator",
+            integrator,
+        ]);
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(stdout.contains("h = 1.6667e-2 s"), "{integrator}: {stdout}");
+        stdout.contains("within 2 % of a whole multiple of h_c")
+    };
+    for closed_form in ["harmonic", "harmonic-gs", "harmonic-forced"] {
+        assert!(warns(closed_form), "{closed_form} is not warned");
+    }
+    for other in ["symplectic-euler", "implicit-euler", "theta-mg", "xpbd"] {
+        assert!(
+            !warns(other),
+            "{other} is warned of the closed form's aliasing"
+        );
+    }
+}
+
 #[test]
 fn check_locates_errors_and_fails() {
     let out = harmonic(&[

@@ -88,6 +88,20 @@ impl Integrator {
         )
     }
 
+    /// Whether its spring step is the closed-form oscillator (the harmonic family), whose
+    /// impulse vanishes or reverses at whole multiples of a spring's `h_c`.
+    pub fn uses_closed_form(self) -> bool {
+        matches!(
+            self,
+            Integrator::Harmonic
+                | Integrator::HarmonicPaper
+                | Integrator::HarmonicGs
+                | Integrator::HarmonicSgs
+                | Integrator::HarmonicForced
+                | Integrator::HarmonicForcedGs
+        )
+    }
+
     /// Whether it applies the closed form spring by spring in colour order (Gauss–Seidel).
     fn sweeps(self) -> bool {
         matches!(
