@@ -26,7 +26,7 @@ pub const CG_MAX_ITERATIONS: usize = 4000;
 /// `α = hs c + hs² κ (1 − t)` and `β = hs² κ t`, and its ends: all a product reads of a spring,
 /// in one record (the products are most of a step, and bound by what they read).
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Block {
+pub(crate) struct Block {
     pub(super) a: u32,
     pub(super) b: u32,
     pub(super) n: DVec3,
