@@ -433,7 +433,7 @@ mod window {
                 config.format = *f;
             }
             surface.configure(&device, &config);
-            let ctx = Arc::new(harmonic::gpu::GpuContext::from_device(
+            let ctx = Arc::new(harmonic::internals::gpu::GpuContext::from_device(
                 device,
                 queue,
                 adapter.get_info(),

@@ -3,6 +3,9 @@
 //! Topology (springs, CSR incidence, masses) is packed once per topology change; between
 //! gathers the buffers are the state and the World is only written back at scatter.
 
+// Not API: reachable from outside only through the hidden `internals` module.
+#![allow(missing_docs)]
+
 use std::ops::Range;
 
 use glam::DVec3;
@@ -11,7 +14,6 @@ use rayon::prelude::*;
 
 use crate::components::{ClothSprings, GridLink, Particle, Pin, SceneIndex, Spring};
 use crate::error::SimError;
-use crate::integrate::paper::reduced_mass;
 
 /// A spring in packed form. `wa`/`wb` split the pair's relative velocity change by mass:
 /// `Δv_a = −wa φ n`, `Δv_b = +wb φ n`, with `wa = μ/m_a`, `wb = μ/m_b` (0 at a pinned end).
@@ -650,4 +652,14 @@ fn locate_grids(world: &World, keys: &[(u32, u32, Entity)]) -> Result<Vec<Packed
         });
     }
     Ok(grids)
+}
+
+/// `m_a m_b/(m_a+m_b)`, the free end's mass when the other is pinned (infinite).
+pub fn reduced_mass(m_a: f64, m_b: f64) -> f64 {
+    match (m_a.is_finite(), m_b.is_finite()) {
+        (true, true) => m_a * m_b / (m_a + m_b),
+        (true, false) => m_a,
+        (false, true) => m_b,
+        (false, false) => f64::INFINITY,
+    }
 }

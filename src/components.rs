@@ -7,7 +7,9 @@ use hecs::Entity;
 /// A point mass. A pinned particle also carries [`Pin`] and then ignores its mass.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Particle {
+    /// Position (m).
     pub position: DVec3,
+    /// Velocity (m/s).
     pub velocity: DVec3,
     /// kg, finite and > 0.
     pub mass: f64,
@@ -32,7 +34,9 @@ pub struct Quarantined {
 /// A spring between two particle entities, force `−κ δ − c δ̇` along its axis.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Spring {
+    /// One end: a particle entity.
     pub a: Entity,
+    /// The other end: a particle entity.
     pub b: Entity,
     /// m, > 0.
     pub rest_length: f64,
@@ -54,7 +58,9 @@ pub struct SceneIndex(pub u32);
 pub struct ClothGrid {
     /// Scene index of particle `(0, 0)`.
     pub first: u32,
+    /// Particles per row.
     pub cols: u32,
+    /// Rows of particles.
     pub rows: u32,
 }
 
@@ -85,7 +91,9 @@ impl ClothGrid {
 /// no memory each; scene cloths are built this way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClothSprings {
+    /// The particles it joins.
     pub grid: ClothGrid,
+    /// The springs, each link repeated over the whole grid.
     pub links: Vec<GridLink>,
 }
 

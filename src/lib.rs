@@ -32,38 +32,49 @@
 
 // Library code returns errors; each remaining unwrap/expect names the invariant it relies on.
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
+#![warn(missing_docs)]
 
-pub mod accuracy;
-pub mod backend;
-pub mod bench;
-pub mod buffers;
-pub mod components;
-pub mod contacts;
-pub mod error;
+mod buffers;
+mod components;
+mod config;
+mod contacts;
+mod error;
 #[cfg(feature = "gpu")]
-pub mod gpu;
-pub mod integrate;
-pub mod metrics;
-pub mod peer;
+mod gpu;
+mod integrate;
+mod metrics;
 #[cfg(feature = "gpu")]
 pub mod render;
 pub mod scene;
-pub mod schedule;
+mod schedule;
 mod simulation;
-pub mod stability;
-pub mod statics;
-pub mod step_control;
+mod step_control;
 
-pub use backend::Backend;
+#[doc(hidden)]
+pub mod internals;
+
+/// The closed-form spring step: the math, its derivation and how it corrects the paper.
+pub mod math {
+    #![doc = include_str!("integrate/MATH.md")]
+}
+
 pub use components::{
     ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
 };
-pub use error::{Error, GpuError, SceneError, SimError};
-pub use integrate::Integrator;
+pub use config::{Backend, Integrator, SimConfig};
+pub use contacts::{Attachment, ContactStats, Props, RigidProp};
+pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::Scene;
-pub use schedule::{Stage, StepStats};
-pub use simulation::{Advance, ClothId, Diagnostics, RenderView, SimConfig, Simulation};
+pub use schedule::StepStats;
+pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
+pub use step_control::StepChoice;
 
+// The versions the engine is built against, so a game matches them without guessing.
+pub use glam;
+pub use hecs;
+pub use rapier3d;
+
+/// The names most programs need: `use harmonic::prelude::*;`.
 pub mod prelude {
     pub use crate::{
         Advance, Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation,

@@ -1,5 +1,8 @@
 //! Diagnostics over the packed state: energy, strain, step size against the springs' periods.
 
+// Not API: reachable from outside only through the hidden `internals` module.
+#![allow(missing_docs)]
+
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -85,4 +88,14 @@ pub fn momentum(packed: &Packed) -> DVec3 {
         .filter(|&i| packed.inv_mass[i] != 0.0)
         .map(|i| packed.mass(i) * packed.v[i])
         .sum()
+}
+
+/// RMS distance between two position sets of equal length.
+pub fn rms(a: &[DVec3], b: &[DVec3]) -> f64 {
+    (a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x - *y).length_squared())
+        .sum::<f64>()
+        / a.len() as f64)
+        .sqrt()
 }

@@ -16,6 +16,7 @@ use crate::error::GpuError;
 use crate::gpu::GpuContext;
 use crate::Simulation;
 
+/// The WGSL source of the renderer's pipelines (`shaders/render.wgsl`).
 pub const SHADER: &str = include_str!("../shaders/render.wgsl");
 
 /// The offscreen colour format (no sRGB conversion: the shader's colours are written as is).
@@ -44,9 +45,13 @@ pub struct Style {
 /// and raised `pitch` (radians).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
+    /// The point looked at (m).
     pub target: Vec3,
+    /// Turn about the vertical axis (radians); 0 looks from +z.
     pub yaw: f32,
+    /// Elevation above the horizontal (radians).
     pub pitch: f32,
+    /// From the eye to `target` (m).
     pub distance: f32,
     /// Vertical field of view (radians).
     pub fov_y: f32,
@@ -73,6 +78,7 @@ impl Camera {
         Self::framing(lo - pad, hi + pad)
     }
 
+    /// The eye's position: `distance` from `target`, at `yaw` and `pitch`.
     pub fn eye(&self) -> Vec3 {
         let (sy, cy) = self.yaw.sin_cos();
         let (sp, cp) = self.pitch.sin_cos();
@@ -418,10 +424,12 @@ impl Renderer {
         })
     }
 
+    /// The GPU context it draws with.
     pub fn context(&self) -> &Arc<GpuContext> {
         &self.ctx
     }
 
+    /// The format of the texture views it draws into.
     pub fn format(&self) -> wgpu::TextureFormat {
         self.format
     }
@@ -744,12 +752,16 @@ fn rope_marker(sim: &Simulation) -> Option<f32> {
 /// RGBA8 pixels, rows top to bottom.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// Four bytes per pixel (R, G, B, A), row by row from the top left.
     pub rgba: Vec<u8>,
 }
 
 impl Image {
+    /// The RGBA of pixel `(x, y)`, `x` from the left and `y` from the top.
     pub fn pixel(&self, x: u32, y: u32) -> [u8; 4] {
         let i = 4 * (y as usize * self.width as usize + x as usize);
         [
@@ -806,6 +818,7 @@ impl Image {
         Some(out)
     }
 
+    /// Writes the image to `path` as an 8-bit RGBA PNG; an error names the path.
     pub fn write_png(&self, path: &Path) -> Result<(), String> {
         let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
@@ -874,6 +887,7 @@ impl Offscreen {
         })
     }
 
+    /// The renderer that draws into its texture.
     pub fn renderer(&self) -> &Renderer {
         &self.renderer
     }

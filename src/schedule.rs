@@ -1,42 +1,21 @@
-//! The stages of a step, in their fixed order, and what each cost.
+//! What each stage of a frame cost (the order itself is `Simulation::step_coupled`).
 
 use std::time::Duration;
-
-/// The stages a frame runs, in this order. A stage a scene does not need is not in its
-/// schedule: without bodies there is no contact stage and no rapier world.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Stage {
-    /// World → packed buffers; runs only when the World changed since the last gather.
-    Gather,
-    /// `substeps` steps of the integrator on the packed buffers; with props, each substep is
-    /// followed by the contact stage.
-    Integrate,
-    /// Per substep: rapier steps the bodies, attachments follow them, particles are pushed out
-    /// of colliders with friction, and dynamic bodies get the opposite impulses.
-    Contacts,
-    /// Packed buffers → World (positions and velocities), once per frame.
-    Scatter,
-}
-
-impl Stage {
-    pub const ORDER: [Stage; 4] = [
-        Stage::Gather,
-        Stage::Integrate,
-        Stage::Contacts,
-        Stage::Scatter,
-    ];
-}
 
 /// Wall time of each stage in the last frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepStats {
+    /// Re-gathering the World into packed buffers (about zero when not `gathered`).
     pub gather: Duration,
+    /// The substeps' integration, less the contact stage.
     pub integrate: Duration,
     /// The contact stage (zero without props).
     pub contacts: Duration,
+    /// The quarantine and writing the state back into the World.
     pub scatter: Duration,
     /// Whether this frame re-gathered the World.
     pub gathered: bool,
+    /// Substeps the frame took.
     pub substeps: u32,
     /// Particles this frame found non-finite and quarantined (frozen at their last finite
     /// position; [`crate::Simulation::quarantined`] lists them all).
@@ -44,6 +23,7 @@ pub struct StepStats {
 }
 
 impl StepStats {
+    /// Sum of the four stages' times.
     pub fn total(&self) -> Duration {
         self.gather + self.integrate + self.contacts + self.scatter
     }

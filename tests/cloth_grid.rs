@@ -11,7 +11,7 @@ use harmonic::{ClothGrid, ClothSprings, GridLink, SceneIndex, SimError};
 use hecs::{Entity, World};
 
 fn cloth((cols, rows): (u32, u32), integrator: Integrator) -> Scene {
-    let mut scene = harmonic::bench::hanging_cloth(cols);
+    let mut scene = harmonic::internals::hanging_cloth(cols);
     scene.cloths[0].resolution = (cols, rows);
     scene.dt = 1e-3;
     scene.substeps = Some(4);

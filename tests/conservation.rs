@@ -44,7 +44,7 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
 
 fn momentum(sim: &Simulation) -> (DVec3, f64) {
     let p = sim.packed();
-    let total = harmonic::metrics::momentum(p);
+    let total = harmonic::internals::metrics::momentum(p);
     let scale = (0..p.particle_count())
         .map(|i| p.mass(i) * p.v[i].length())
         .sum();
@@ -64,7 +64,7 @@ fn momentum_is_conserved_to_round_off() {
         let drift = (p1 - p0).length() / scale;
         println!("{integrator}: momentum drift {drift:.2e} of Σ m|v|");
         let tol = if integrator == Integrator::ImplicitEuler {
-            10.0 * harmonic::integrate::implicit::CG_TOLERANCE
+            10.0 * harmonic::internals::integrate::implicit::CG_TOLERANCE
         } else {
             1e-12
         };

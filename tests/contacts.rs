@@ -1,8 +1,8 @@
 //! Cloth against rapier bodies: no tunnelling, attachments that follow their body, momentum
 //! exchanged exactly, particles kept outside colliders.
 
-use harmonic::contacts::Attachment;
 use harmonic::prelude::*;
+use harmonic::Attachment;
 
 fn load(name: &str) -> Simulation {
     Simulation::load(format!("{}/scenes/{name}", env!("CARGO_MANIFEST_DIR")))
@@ -173,7 +173,7 @@ fn a_trampoline_carries_the_weight_of_the_ball_at_rest() {
 /// says each frame, the cloth edge attached to it follows, and the pull leaves the boxes.
 #[test]
 fn a_position_driven_body_follows_its_path_and_drags_the_cloth() {
-    use harmonic::contacts::path_pose;
+    use harmonic::internals::contacts::path_pose;
     let scene = Scene::load(format!(
         "{}/scenes/tablecloth.ron",
         env!("CARGO_MANIFEST_DIR")

@@ -1,7 +1,7 @@
 //! Every integrator converges to a fine-step RK4 reference at its order as h shrinks (and the
 //! paper's printed step does not converge at all).
 
-use harmonic::accuracy::rms;
+use harmonic::internals::metrics::rms;
 use harmonic::prelude::*;
 
 const T: f64 = 0.25;

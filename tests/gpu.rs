@@ -11,7 +11,7 @@ use std::mem::{offset_of, size_of};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use harmonic::gpu::{self, GpuContext, Kernel};
+use harmonic::internals::gpu::{self, GpuContext, Kernel};
 use harmonic::prelude::*;
 use harmonic::{Backend, GpuError, SimError};
 use hecs::World;
@@ -297,8 +297,8 @@ fn cpu_against_gpu(
 /// explicit ones'). Explicit Euler, unstable on undamped springs at any h, a tenth of that
 /// again, so its growth over a run stays below 20 %.
 fn parity_config(world: &World, omega: f64, zeta: f64, integrator: Integrator) -> SimConfig {
-    let packed = harmonic::buffers::Packed::gather(world).expect("valid");
-    let omega = harmonic::step_control::network_frequency(&packed, 200).max(omega);
+    let packed = harmonic::internals::buffers::Packed::gather(world).expect("valid");
+    let omega = harmonic::internals::step_control::network_frequency(&packed, 200).max(omega);
     let mut h = 0.1 * std::f64::consts::PI / omega / (1.0 + zeta);
     if integrator == Integrator::ExplicitEuler {
         h /= 10.0;
@@ -372,7 +372,7 @@ fn gpu_matches_cpu_on_random_scenes() {
 fn cloth_grids_on_the_gpu_match_the_cpu_grid_pass() {
     let Some(_ctx) = context() else { return };
     let world = |damping: f64| {
-        let mut scene = harmonic::bench::hanging_cloth(12);
+        let mut scene = harmonic::internals::hanging_cloth(12);
         let mut second = scene.cloths[0].clone();
         second.origin = [1.0, 1.2, 0.3];
         second.resolution = (9, 7);
@@ -634,7 +634,7 @@ fn specialisation_follows_the_scene() {
     assert_eq!(s.update, 1);
     // A cloth under symplectic Euler stays a grid on the device; under harmonic-gs it does not.
     let cloth = |integrator: &str| {
-        let mut scene = harmonic::bench::hanging_cloth(8);
+        let mut scene = harmonic::internals::hanging_cloth(8);
         scene.integrator = Some(integrator.into());
         scene.backend = Some("gpu".into());
         let mut sim = Simulation::from_scene(&scene).expect("GPU");

@@ -40,7 +40,7 @@ static GLOBAL: Tracking = Tracking;
 
 /// Peak heap bytes per particle while `integrator` builds, gathers and steps an n×n cloth.
 fn peak_per_particle(n: u32, integrator: Integrator) -> f64 {
-    let mut scene = harmonic::bench::hanging_cloth(n);
+    let mut scene = harmonic::internals::hanging_cloth(n);
     scene.integrator = Some(integrator.name().into());
     let base = LIVE.load(Ordering::Relaxed);
     PEAK.store(base, Ordering::Relaxed);

@@ -13,7 +13,7 @@ const J: usize = 5 * 16 + 5;
 const K: usize = J + 1; // its structural neighbour along the row
 
 fn cloth(integrator: Integrator) -> Simulation {
-    let mut scene = harmonic::bench::hanging_cloth(16);
+    let mut scene = harmonic::internals::hanging_cloth(16);
     scene.dt = 1e-3;
     scene.substeps = Some(4);
     scene.integrator = Some(integrator.name().into());
@@ -231,7 +231,7 @@ fn misuse_of_the_world_is_a_typed_error_and_recoverable() {
 
 #[test]
 fn the_gpu_back_end_quarantines_too() {
-    let mut scene = harmonic::bench::hanging_cloth(16);
+    let mut scene = harmonic::internals::hanging_cloth(16);
     scene.dt = 1e-3;
     scene.substeps = Some(4);
     scene.backend = Some("gpu".into());

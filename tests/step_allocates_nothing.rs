@@ -27,7 +27,7 @@ unsafe impl GlobalAlloc for Counting {
 static GLOBAL: Counting = Counting;
 
 fn allocations_per_frame(n: u32, integrator: Integrator, exact: bool) -> f64 {
-    let mut scene = harmonic::bench::hanging_cloth(n);
+    let mut scene = harmonic::internals::hanging_cloth(n);
     scene.integrator = Some(integrator.name().to_string());
     scene.exact_displacement = exact;
     scene.substeps = Some(4);
@@ -68,7 +68,7 @@ fn stepping_allocates_nothing() {
     }
     // The game-loop path: advance (fixed steps from frame times) and render (interpolated
     // positions, normals, triangles).
-    let mut sim = Simulation::from_scene(&harmonic::bench::hanging_cloth(24)).unwrap();
+    let mut sim = Simulation::from_scene(&harmonic::internals::hanging_cloth(24)).unwrap();
     for _ in 0..5 {
         let a = sim.advance(1.0 / 60.0).unwrap();
         sim.render(a.alpha);

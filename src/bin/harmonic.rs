@@ -1,4 +1,5 @@
-//! `harmonic`: run, check, measure stability of and benchmark scenes, headless.
+//! `harmonic`: run, check and render scenes, headless. The measuring apparatus (speed against
+//! error, the stability suite, throughput, the rapier peer, the GPU bench) is `harmonic-lab`.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -8,7 +9,7 @@ use std::time::Instant;
 
 use clap::{Parser, Subcommand};
 use harmonic::scene::Limits;
-use harmonic::{bench, stability, Backend, Integrator, Scene, SimError, Simulation};
+use harmonic::{Backend, Scene, SimError, Simulation};
 
 #[derive(Parser)]
 #[command(
@@ -29,82 +30,6 @@ enum Command {
     Check {
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
-    },
-    /// Run the hard-case stability suite and print Markdown tables.
-    Stability {
-        /// Simulated seconds per hard case.
-        #[arg(long, default_value_t = 10.0)]
-        seconds: f64,
-        /// Also run the 128×128 cloth (minutes).
-        #[arg(long)]
-        full: bool,
-        /// Write the report here as well as to stdout.
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Instead of running the suite, write its cases as scene files into this folder.
-        #[arg(long)]
-        write_scenes: Option<PathBuf>,
-    },
-    /// Speed against error: every integrator at several steps on the bench scenes, against an
-    /// RK4 reference. Writes CSV, Markdown and log-log charts (SVG, PNG) into --out.
-    Bench {
-        /// Skip the 128×128 cloth.
-        #[arg(long)]
-        quick: bool,
-        /// Timed repeats per run; the median is reported.
-        #[arg(long, default_value_t = 3)]
-        repeats: u32,
-        #[arg(long, default_value = "bench-out")]
-        out: PathBuf,
-        /// Only these scenes (chain20, cloth16, cloth128; drop16 and drop32 by name only; default: the first three).
-        #[arg(long, value_delimiter = ',')]
-        scenes: Vec<String>,
-        /// Only these integrators (default: every contender and rapier's cloth).
-        #[arg(long, value_delimiter = ',')]
-        integrators: Vec<String>,
-        /// These steps per simulated second instead of each integrator's ladder.
-        #[arg(long, value_delimiter = ',')]
-        steps: Vec<u64>,
-        /// Every spring's stiffness times this factor (damping ratios kept).
-        #[arg(long)]
-        stiffen: Option<f64>,
-        /// `gpu`: instead, GPU substeps/s against cloth size beside the CPU kernel, against the
-        /// memory-bound floor, and what each shader specialisation buys (writes gpu.md).
-        #[arg(long, default_value = "cpu")]
-        backend: String,
-        /// Cloth sizes N (N×N) for `--backend gpu`.
-        #[arg(long, value_delimiter = ',', default_value = "64,128,256,512,1024")]
-        sizes: Vec<u32>,
-        /// Largest N the CPU kernel also runs for `--backend gpu`.
-        #[arg(long, default_value_t = 1024)]
-        cpu_max: u32,
-        /// Integrator for `--backend gpu`.
-        #[arg(long, default_value = "symplectic-euler")]
-        integrator: String,
-    },
-    /// Spring-substeps per second of each integrator on an N×N hanging cloth, side by side.
-    Throughput {
-        /// Cloth resolution N (N×N particles).
-        #[arg(long, default_value_t = 128)]
-        size: u32,
-        /// Cloths of that size side by side (each a grid of its own).
-        #[arg(long, default_value_t = 1)]
-        cloths: u32,
-        /// Substeps timed per integrator and repeat.
-        #[arg(long, default_value_t = 200)]
-        substeps: u32,
-        /// Repeats; the median is reported.
-        #[arg(long, default_value_t = 5)]
-        repeats: u32,
-        /// Integrators to compare (default: all but the RK4 reference).
-        #[arg(long, value_delimiter = ',')]
-        integrators: Vec<String>,
-    },
-    /// A cloth scene draped on one fixed ball, run by this engine (CPU) and by rapier 0.36's own
-    /// soft-body cloth on the same ball, side by side: wall time, strain, penetration.
-    DrapePeer {
-        #[arg(default_value = "scenes/drape_sphere.ron")]
-        scene: PathBuf,
     },
     /// Render a scene headless to PNG with wgpu offscreen (a software adapter such as Mesa's
     /// lavapipe works): shaded cloth, rigid bodies, a floor grid.
@@ -206,67 +131,6 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run(args),
         Command::Check { scenes } => check(&scenes),
-        Command::Stability {
-            write_scenes: Some(dir),
-            ..
-        } => stability::write_hard_scenes(&dir)
-            .map(|n| println!("wrote {n} scenes to {}", dir.display()))
-            .map_err(|e| format!("{}: {e}", dir.display())),
-        Command::Stability {
-            seconds, full, out, ..
-        } => {
-            let report = stability::report(&stability::Options { seconds, full });
-            print!("{report}");
-            match out {
-                Some(path) => {
-                    std::fs::write(&path, &report).map_err(|e| format!("{}: {e}", path.display()))
-                }
-                None => Ok(()),
-            }
-        }
-        Command::Bench {
-            quick,
-            repeats,
-            out,
-            scenes,
-            integrators,
-            steps,
-            stiffen,
-            backend,
-            sizes,
-            cpu_max,
-            integrator,
-        } => match backend.as_str() {
-            "cpu" => {
-                let chosen = if integrators.is_empty() {
-                    Ok(Vec::new())
-                } else {
-                    parse_integrators(&integrators)
-                };
-                chosen.and_then(|integrators| {
-                    let selection = harmonic::accuracy::Selection {
-                        scenes,
-                        integrators,
-                        steps,
-                        stiffen,
-                    };
-                    selection.validate(quick)?;
-                    bench_report(quick, repeats, &selection, &out)
-                })
-            }
-            "gpu" => gpu_bench(&sizes, &integrator, repeats, cpu_max, &out),
-            other => Err(format!("--backend {other}: the bench runs `cpu` or `gpu`")),
-        },
-        Command::Throughput {
-            size,
-            cloths,
-            substeps,
-            repeats,
-            integrators,
-        } => parse_integrators(&integrators).map(|list| {
-            print!("{}", bench::report(size, cloths, substeps, repeats, &list));
-        }),
-        Command::DrapePeer { scene } => drape_peer(&scene),
         Command::Render(args) => render(args),
     };
     match result {
@@ -276,35 +140,6 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
-}
-
-#[cfg(feature = "gpu")]
-fn gpu_bench(
-    sizes: &[u32],
-    integrator: &str,
-    repeats: u32,
-    cpu_max: u32,
-    out: &std::path::Path,
-) -> Result<(), String> {
-    let integrator: Integrator = integrator.parse().map_err(|e: SimError| e.to_string())?;
-    if sizes.is_empty() || sizes.contains(&0) {
-        return Err("--sizes: give one or more sizes ≥ 1".into());
-    }
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let md = harmonic::gpu::bench::report(sizes, integrator, repeats, cpu_max, |what| {
-        eprintln!("bench: {what}")
-    })
-    .map_err(|e| e.to_string())?;
-    let path = out.join("gpu.md");
-    std::fs::write(&path, &md).map_err(|e| format!("{}: {e}", path.display()))?;
-    print!("{md}");
-    println!("wrote {}", path.display());
-    Ok(())
-}
-
-#[cfg(not(feature = "gpu"))]
-fn gpu_bench(_: &[u32], _: &str, _: u32, _: u32, _: &std::path::Path) -> Result<(), String> {
-    Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
 /// A progress bar on stderr when it is a terminal; None otherwise (callers print plain lines).
@@ -416,63 +251,6 @@ fn render(_: RenderArgs) -> Result<(), String> {
     Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
-fn bench_report(
-    quick: bool,
-    repeats: u32,
-    selection: &harmonic::accuracy::Selection,
-    out: &std::path::Path,
-) -> Result<(), String> {
-    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let bar = progress_bar(1);
-    let (rows, refs) =
-        harmonic::accuracy::measure(quick, repeats, selection, |done, total, label| match &bar {
-            Some(b) => {
-                b.set_length(total as u64);
-                b.set_position(done as u64);
-                b.set_message(label.to_string());
-            }
-            None => eprintln!("[{done}/{total}] {label}"),
-        });
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    let md = harmonic::accuracy::markdown(&rows, &refs);
-    let write = |name: &str, text: &str| {
-        std::fs::write(out.join(name), text)
-            .map_err(|e| format!("{}: {e}", out.join(name).display()))
-    };
-    write("bench.csv", &harmonic::accuracy::csv(&rows))?;
-    write("bench.md", &md)?;
-    for r in &refs {
-        let scene = r.scene;
-        harmonic::accuracy::chart(
-            &rows,
-            r,
-            &out.join(format!("{scene}.svg")),
-            &out.join(format!("{scene}.png")),
-        )?;
-    }
-    print!("{md}");
-    println!(
-        "wrote {}/bench.csv, bench.md and a chart per scene (SVG, PNG)",
-        out.display()
-    );
-    Ok(())
-}
-
-fn parse_integrators(names: &[String]) -> Result<Vec<Integrator>, String> {
-    if names.is_empty() {
-        return Ok(Integrator::ALL
-            .into_iter()
-            .filter(|i| *i != Integrator::Rk4)
-            .collect());
-    }
-    names
-        .iter()
-        .map(|n| n.parse::<Integrator>().map_err(|e| e.to_string()))
-        .collect()
-}
-
 fn check(paths: &[PathBuf]) -> Result<(), String> {
     let mut bad = 0;
     for path in paths {
@@ -540,14 +318,19 @@ fn run(args: RunArgs) -> Result<(), String> {
     let packed = sim.packed();
     let (n, m) = (packed.particle_count(), packed.spring_count());
     let start = sim.diagnostics();
-    let ratio = harmonic::metrics::worst_step_ratio(packed, config.h());
+    let ratio = harmonic::internals::metrics::worst_step_ratio(packed, config.h());
     println!(
         "scene: {} ({n} particles, {m} springs)",
         args.scene.display()
     );
     println!(
-        "integrator: {}{}, dt {} s, {} substep(s), h = {:.4e} s",
+        "integrator: {}{}{}, dt {} s, {} substep(s), h = {:.4e} s",
         config.integrator,
+        if config.integrator.is_research() {
+            " (research)"
+        } else {
+            ""
+        },
         if config.exact_displacement {
             " (exact displacement)"
         } else {
@@ -586,7 +369,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let aliased = config
         .integrator
         .uses_closed_form()
-        .then(|| harmonic::step_control::aliasing(packed, config.h(), 0.02))
+        .then(|| harmonic::internals::step_control::aliasing(packed, config.h(), 0.02))
         .flatten();
     if let Some((k, r)) = aliased {
         println!(
@@ -639,7 +422,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             max_depth = max_depth.max(p.stats().max_depth);
             swept += p.stats().swept;
         }
-        max_strain = max_strain.max(harmonic::metrics::max_strain(sim.packed()));
+        max_strain = max_strain.max(harmonic::internals::metrics::max_strain(sim.packed()));
         if let Some(w) = traj.as_mut() {
             if step % args.every == 0 {
                 write_rows(w, &sim, step).map_err(|e| e.to_string())?;
@@ -729,93 +512,6 @@ fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Resul
             "{step},{t},{i},{},{},{},{},{},{}",
             x.x, x.y, x.z, v.x, v.y, v.z
         )?;
-    }
-    Ok(())
-}
-
-/// `harmonic drape-peer`: the scene's first cloth on its ball, ours against rapier's.
-fn drape_peer(path: &PathBuf) -> Result<(), String> {
-    use harmonic::peer;
-    use harmonic::scene::props::Shape;
-    let scene = Scene::load(path).map_err(|e| e.to_string())?;
-    let cloth = scene.cloths.first().ok_or("the scene has no cloth")?;
-    let (centre, radius) = scene
-        .bodies
-        .iter()
-        .find_map(|b| match b.shape {
-            Shape::Ball { radius } => Some((glam::DVec3::from(b.position), radius)),
-            _ => None,
-        })
-        .ok_or("the scene has no ball")?;
-    let contact = scene.contact.unwrap_or_default();
-    let seconds = scene.seconds.unwrap_or(3.0);
-    let gravity = glam::DVec3::from(scene.gravity);
-    let figures = |x: &[glam::DVec3]| {
-        let (max, mean) = peer::grid_strain(cloth, x);
-        // How far the deepest particle is inside the ball, and inside the contact shell.
-        let gap = x
-            .iter()
-            .map(|p| (*p - centre).length() - radius)
-            .fold(f64::MAX, f64::min);
-        (
-            max,
-            mean,
-            (-gap).max(0.0),
-            (contact.thickness - gap).max(0.0),
-        )
-    };
-    let mut sim = Simulation::from_scene(&scene).map_err(|e| e.to_string())?;
-    let frames = (seconds / sim.config().dt).round() as u64;
-    let t = Instant::now();
-    for _ in 0..frames {
-        sim.step().map_err(|e| e.to_string())?;
-    }
-    let ours = t.elapsed().as_secs_f64();
-    // Scene order: the scene's loose particles, then the first cloth's.
-    let first = scene.particles.len();
-    let n = (cloth.resolution.0 * cloth.resolution.1) as usize;
-    let a = figures(&sim.positions()[first..first + n]);
-    let (y, theirs) = peer::drape_on_ball(
-        cloth,
-        gravity,
-        centre,
-        radius,
-        contact.thickness,
-        contact.friction,
-        seconds,
-    )?;
-    let b = figures(&y);
-    println!(
-        "{n} particles on a ball of radius {radius} m, {seconds} s simulated, contact thickness {} m",
-        contact.thickness
-    );
-    println!();
-    println!("| engine | wall (s) | wall / simulated | max strain | mean strain | deepest inside the ball (m) | deepest inside the shell (m) |");
-    println!("|---|---|---|---|---|---|---|");
-    let sub = sim.config().substeps;
-    for (name, wall, f) in [
-        (
-            format!(
-                "harmonic ({}, {sub} substeps/frame, CPU)",
-                sim.config().integrator.name()
-            ),
-            ours,
-            a,
-        ),
-        (
-            "rapier 0.36 soft-body cloth (defaults)".to_string(),
-            theirs,
-            b,
-        ),
-    ] {
-        println!(
-            "| {name} | {wall:.3} | {:.3} | {:.2} % | {:.3} % | {:.2e} | {:.2e} |",
-            wall / seconds,
-            100.0 * f.0,
-            100.0 * f.1,
-            f.2,
-            f.3
-        );
     }
     Ok(())
 }

@@ -766,7 +766,7 @@ mod tests {
     #[test]
     fn every_vector_unit_gives_the_same_bits() {
         for (cols, rows) in [(70, 70), (16, 300), (9, 500), (5, 900)] {
-            let mut scene = crate::bench::hanging_cloth(cols);
+            let mut scene = crate::internals::hanging_cloth(cols);
             scene.cloths[0].resolution = (cols, rows);
             let built = scene.build();
             let options = GatherOptions {

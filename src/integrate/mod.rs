@@ -1,4 +1,6 @@
 #![doc = include_str!("MATH.md")]
+// Not API: reachable from outside only through the hidden `internals` module.
+#![allow(missing_docs)]
 
 mod gauss_seidel;
 pub(crate) mod grid;
@@ -9,145 +11,13 @@ pub mod paper;
 pub(crate) mod par;
 pub mod xpbd;
 
-use std::fmt;
-use std::str::FromStr;
-
 use glam::DVec3;
 
 use crate::buffers::{Packed, PackedSpring};
+pub use crate::config::Integrator;
 use crate::error::SimError;
 use harmonic::Linear;
 use paper::PaperSpring;
-
-/// The CPU integrators, all over the same packed buffers.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum Integrator {
-    /// The corrected closed-form spring step, summed per particle (Jacobi).
-    Harmonic,
-    /// The paper's equations as printed, for comparison only.
-    HarmonicPaper,
-    /// `v += a h; x += v h`. The default: fastest at ≤ 1 cm error on the 128×128 cloth
-    /// (`harmonic bench`, BENCHMARKS.md).
-    #[default]
-    SymplecticEuler,
-    /// `x += v h; v += a h`.
-    ExplicitEuler,
-    /// Classical fourth-order Runge–Kutta: the fine-step reference.
-    Rk4,
-    /// The closed form applied spring by spring in Gauss–Seidel order over a colouring.
-    HarmonicGs,
-    /// Each spring's oscillator forced by the other forces, frozen at the start of the step.
-    HarmonicForced,
-    /// Forced, in Gauss–Seidel order.
-    HarmonicForcedGs,
-    /// Symmetric Gauss–Seidel: a forward then a backward colour sweep, each applying half of
-    /// the closed-form impulse for the full step.
-    HarmonicSgs,
-    /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
-    ImplicitEuler,
-    /// Small-step XPBD, one iteration per substep.
-    Xpbd,
-    /// A θ-step (θ = 0.6) solved by one multigrid V-cycle: stable at any step, for steps far
-    /// past the explicit integrators' limits.
-    ThetaMg,
-}
-
-impl Integrator {
-    pub const ALL: [Integrator; 12] = [
-        Integrator::Harmonic,
-        Integrator::HarmonicGs,
-        Integrator::HarmonicSgs,
-        Integrator::HarmonicForced,
-        Integrator::HarmonicForcedGs,
-        Integrator::HarmonicPaper,
-        Integrator::SymplecticEuler,
-        Integrator::ExplicitEuler,
-        Integrator::ImplicitEuler,
-        Integrator::Xpbd,
-        Integrator::ThetaMg,
-        Integrator::Rk4,
-    ];
-
-    /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are on the CPU,
-    /// with no memory per spring (`harmonic` only without exact displacement); the others get
-    /// the cloths' springs expanded one by one.
-    pub fn runs_on_grids(self, exact_displacement: bool) -> bool {
-        match self {
-            Integrator::SymplecticEuler | Integrator::ExplicitEuler => true,
-            Integrator::Harmonic => !exact_displacement,
-            _ => false,
-        }
-    }
-
-    /// Whether the GPU's `grid_pass` steps its cloth grids whole: the Euler integrators, and
-    /// the closed form (its device kernel has no exact displacement).
-    pub fn runs_on_gpu_grids(self) -> bool {
-        matches!(
-            self,
-            Integrator::SymplecticEuler | Integrator::ExplicitEuler | Integrator::Harmonic
-        )
-    }
-
-    /// Whether its spring step is the closed-form oscillator (the harmonic family), whose
-    /// impulse vanishes or reverses at whole multiples of a spring's `h_c`.
-    pub fn uses_closed_form(self) -> bool {
-        matches!(
-            self,
-            Integrator::Harmonic
-                | Integrator::HarmonicPaper
-                | Integrator::HarmonicGs
-                | Integrator::HarmonicSgs
-                | Integrator::HarmonicForced
-                | Integrator::HarmonicForcedGs
-        )
-    }
-
-    /// Whether it applies the closed form spring by spring in colour order (Gauss–Seidel).
-    fn sweeps(self) -> bool {
-        matches!(
-            self,
-            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
-        )
-    }
-
-    /// Whether it needs the springs' colouring (the Gauss–Seidel sweeps and XPBD).
-    pub fn needs_colouring(self) -> bool {
-        self.sweeps() || self == Integrator::Xpbd
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Integrator::Harmonic => "harmonic",
-            Integrator::HarmonicPaper => "harmonic-paper",
-            Integrator::SymplecticEuler => "symplectic-euler",
-            Integrator::ExplicitEuler => "explicit-euler",
-            Integrator::Rk4 => "rk4",
-            Integrator::HarmonicGs => "harmonic-gs",
-            Integrator::HarmonicSgs => "harmonic-sgs",
-            Integrator::HarmonicForced => "harmonic-forced",
-            Integrator::HarmonicForcedGs => "harmonic-forced-gs",
-            Integrator::ImplicitEuler => "implicit-euler",
-            Integrator::Xpbd => "xpbd",
-            Integrator::ThetaMg => "theta-mg",
-        }
-    }
-}
-
-impl fmt::Display for Integrator {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl FromStr for Integrator {
-    type Err = SimError;
-    fn from_str(s: &str) -> Result<Self, SimError> {
-        Integrator::ALL
-            .into_iter()
-            .find(|i| i.name() == s)
-            .ok_or_else(|| SimError::UnknownIntegrator(s.to_string()))
-    }
-}
 
 /// Sweeps of `harmonic-sgs`, alternating direction, each applying 1/SGS_SWEEPS of the impulse.
 pub const SGS_SWEEPS: usize = 2;

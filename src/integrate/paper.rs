@@ -7,6 +7,8 @@
 //! belongs. Algorithm 1's extra factor `h` on the velocity change lives in the particle
 //! update (see `solver`).
 
+use crate::buffers::reduced_mass;
+
 /// Per-spring constants of the printed method.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PaperSpring {
@@ -77,15 +79,5 @@ impl PaperSpring {
             -self.omega0_sq * amp * integral
         };
         self.scale * true_phi
-    }
-}
-
-/// `m_a m_b/(m_a+m_b)`, the free end's mass when the other is pinned (infinite).
-pub fn reduced_mass(m_a: f64, m_b: f64) -> f64 {
-    match (m_a.is_finite(), m_b.is_finite()) {
-        (true, true) => m_a * m_b / (m_a + m_b),
-        (true, false) => m_a,
-        (false, true) => m_b,
-        (false, false) => f64::INFINITY,
     }
 }

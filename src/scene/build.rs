@@ -10,7 +10,10 @@ use crate::SimConfig;
 
 /// A scene's World and the settings it asked for.
 pub struct BuiltScene {
+    /// The scene's entities: particles, springs, each cloth's [`ClothSprings`] and a
+    /// [`crate::RigidProp`] per body.
     pub world: World,
+    /// The step, gravity, integrator and back end the scene asked for.
     pub config: SimConfig,
     /// The rapier world of the scene's bodies; None without bodies (no contact stage then).
     pub props: Option<crate::contacts::Props>,

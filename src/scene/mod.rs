@@ -43,13 +43,16 @@ fn default_gravity() -> V3 {
 /// [`crate::Simulation::from_scene_with`], or `--max-particles` / `--max-springs`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Limits {
+    /// Most particles a scene may build ([`Scene::particle_count`]).
     pub max_particles: u64,
+    /// Most springs a scene may build ([`Scene::spring_count`]).
     pub max_springs: u64,
     /// Fixed substeps per frame (the automatic choice caps itself at the same default).
     pub max_substeps: u32,
 }
 
 impl Limits {
+    /// The defaults: 2²² particles, 2²⁵ springs and 100 000 fixed substeps per frame.
     pub const DEFAULT: Limits = Limits {
         max_particles: 1 << 22,
         max_springs: 1 << 25,
@@ -67,6 +70,7 @@ impl Default for Limits {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, rename = "Scene")]
 pub struct Scene {
+    /// A label for the scene; the simulation does not read it.
     #[serde(default)]
     pub name: Option<String>,
     /// Frame step (s): one `Simulation::step` advances this much, in `substeps` substeps.
@@ -74,6 +78,7 @@ pub struct Scene {
     /// Substeps per frame; absent: chosen automatically to keep the integrator stable.
     #[serde(default)]
     pub substeps: Option<u32>,
+    /// Gravitational acceleration (m/s²); `(0, −9.81, 0)` when absent.
     #[serde(default = "default_gravity")]
     pub gravity: V3,
     /// Integrator name; the engine's default (`symplectic-euler`) when absent.
@@ -88,12 +93,16 @@ pub struct Scene {
     /// Default run length for `harmonic run` (s).
     #[serde(default)]
     pub seconds: Option<f64>,
+    /// Explicit particles: scene indices 0, 1, … in this order.
     #[serde(default)]
     pub particles: Vec<ParticleDef>,
+    /// Springs between explicit particles.
     #[serde(default)]
     pub springs: Vec<SpringDef>,
+    /// Generated cloth grids.
     #[serde(default)]
     pub cloths: Vec<Cloth>,
+    /// Generated ropes and chains.
     #[serde(default)]
     pub ropes: Vec<Rope>,
     /// Rigid props (rapier bodies, one collider each). None: no contact stage, no rapier world.
@@ -107,29 +116,40 @@ pub struct Scene {
     pub attachments: Vec<props::AttachmentDef>,
 }
 
+/// An explicit particle of a scene.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ParticleDef {
+    /// Start position (m).
     pub position: V3,
+    /// Start velocity (m/s); zero when absent.
     #[serde(default)]
     pub velocity: V3,
     /// kg, > 0 (also for pinned particles, whose mass sets frequency-given springs).
     pub mass: f64,
+    /// Held where it is (a [`crate::Pin`]).
     #[serde(default)]
     pub pinned: bool,
 }
 
+/// A spring between two explicit particles, with its material.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SpringDef {
+    /// One end: an index into `particles`.
     pub a: usize,
+    /// The other end: an index into `particles`.
     pub b: usize,
+    /// κ (N/m); give this or `frequency`.
     #[serde(default)]
     pub stiffness: Option<f64>,
+    /// c (N·s/m); give this or `damping_ratio` (no damping without either).
     #[serde(default)]
     pub damping: Option<f64>,
+    /// Natural frequency f (Hz), giving `κ = μ (2πf)²`; give this or `stiffness`.
     #[serde(default)]
     pub frequency: Option<f64>,
+    /// Damping ratio ζ, giving `c = 2 ζ √(κ μ)`; give this or `damping`.
     #[serde(default)]
     pub damping_ratio: Option<f64>,
     /// Defaults to the initial distance of the two ends.
@@ -138,6 +158,7 @@ pub struct SpringDef {
 }
 
 impl SpringDef {
+    /// Its material: the stiffness and damping fields as a [`SpringSpec`].
     pub fn spec(&self) -> SpringSpec {
         SpringSpec {
             stiffness: self.stiffness,
@@ -152,12 +173,16 @@ impl SpringDef {
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SpringSpec {
+    /// κ (N/m); give this or `frequency`.
     #[serde(default)]
     pub stiffness: Option<f64>,
+    /// c (N·s/m); give this or `damping_ratio` (no damping without either).
     #[serde(default)]
     pub damping: Option<f64>,
+    /// Natural frequency f (Hz), giving `κ = μ (2πf)²`; give this or `stiffness`.
     #[serde(default)]
     pub frequency: Option<f64>,
+    /// Damping ratio ζ, giving `c = 2 ζ √(κ μ)`; give this or `damping`.
     #[serde(default)]
     pub damping_ratio: Option<f64>,
 }
@@ -175,13 +200,21 @@ pub enum Plane {
 /// A pinned part of a cloth. Row 0 is the "top" (the row at `origin`).
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 pub enum Anchor {
+    /// The particle at column 0 of row 0.
     TopLeft,
+    /// The particle at the last column of row 0.
     TopRight,
+    /// The particle at column 0 of the last row.
     BottomLeft,
+    /// The particle at the last column of the last row.
     BottomRight,
+    /// Every particle of row 0.
     TopEdge,
+    /// Every particle of the last row.
     BottomEdge,
+    /// Every particle of column 0.
     LeftEdge,
+    /// Every particle of the last column.
     RightEdge,
     /// `(column, row)`.
     Particle(u32, u32),
@@ -197,6 +230,7 @@ pub struct Cloth {
     pub size: (f64, f64),
     /// `(columns, rows)` of particles, each ≥ 2.
     pub resolution: (u32, u32),
+    /// The plane the grid is laid out in.
     #[serde(default)]
     pub plane: Plane,
     /// Total mass (kg), spread evenly over the particles.
@@ -209,8 +243,10 @@ pub struct Cloth {
     /// Springs to the second neighbour along rows and columns.
     #[serde(default)]
     pub bend: Option<SpringSpec>,
+    /// The parts held in place.
     #[serde(default)]
     pub pins: Vec<Anchor>,
+    /// Start velocity of every particle (m/s).
     #[serde(default)]
     pub velocity: V3,
 }
@@ -219,15 +255,20 @@ pub struct Cloth {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Rope {
+    /// Position of the first particle (m).
     pub start: V3,
+    /// Position of the last particle (m).
     pub end: V3,
     /// Number of particles, ≥ 2.
     pub particles: u32,
     /// Total mass (kg).
     pub mass: f64,
+    /// Material of the springs between neighbours.
     pub spring: SpringSpec,
+    /// Pin the first particle (`true` when absent).
     #[serde(default = "yes")]
     pub pin_start: bool,
+    /// Pin the last particle.
     #[serde(default)]
     pub pin_end: bool,
     /// Springs to the second neighbour (stiff chains resist folding).

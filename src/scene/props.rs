@@ -26,6 +26,7 @@ pub enum BodyKind {
 pub struct Keyframe {
     /// Simulated time (s).
     pub time: f64,
+    /// The body's position (m).
     pub position: V3,
     /// Axis-angle (axis times angle in radians).
     #[serde(default)]
@@ -35,33 +36,48 @@ pub struct Keyframe {
 /// A collider shape, in the body's frame. Lengths in metres.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 pub enum Shape {
+    /// A sphere.
     Ball {
+        /// Radius (m).
         radius: f64,
     },
+    /// A box.
     Cuboid {
+        /// Half its size along x, y and z (m).
         half_extents: V3,
     },
     /// Along the body's y axis.
     Capsule {
+        /// Half the length of the segment between the caps' centres (m).
         half_height: f64,
+        /// Radius of the caps and the shaft (m).
         radius: f64,
     },
     /// Along the body's y axis.
     Cylinder {
+        /// Half its height (m).
         half_height: f64,
+        /// Radius (m).
         radius: f64,
     },
+    /// The convex hull of a set of points.
     ConvexHull {
+        /// The points (m), at least 4, spanning a volume.
         points: Vec<V3>,
     },
+    /// A triangle mesh.
     TriMesh {
+        /// Vertex positions (m).
         vertices: Vec<V3>,
+        /// Triangles, as indices into `vertices`.
         indices: Vec<[u32; 3]>,
     },
     /// `heights[row][col]` on a grid spanning `scale.x` × `scale.z`, heights times `scale.y`,
     /// centred on the body.
     HeightField {
+        /// Heights before scaling, one row of columns each (at least 2 × 2, rows of equal length).
         heights: Vec<Vec<f64>>,
+        /// Extent of the grid along x and z (m), and the factor on the heights.
         scale: V3,
     },
 }
@@ -70,15 +86,20 @@ pub enum Shape {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct BodyDef {
+    /// How it moves.
     pub kind: BodyKind,
+    /// Its collider's shape.
     pub shape: Shape,
+    /// Start position (m); a body with a `path` starts at its first keyframe.
     #[serde(default)]
     pub position: V3,
     /// Axis-angle (axis times angle in radians).
     #[serde(default)]
     pub rotation: V3,
+    /// Start velocity (m/s).
     #[serde(default)]
     pub velocity: V3,
+    /// Start angular velocity (rad/s).
     #[serde(default)]
     pub angular_velocity: V3,
     /// kg/m³ (default 1000); give this or `mass`.
@@ -96,6 +117,7 @@ pub struct BodyDef {
     /// Dynamic only: rapier's velocity damping (1/s), the drag of the air around the body.
     #[serde(default)]
     pub linear_damping: f64,
+    /// Dynamic only: rapier's angular velocity damping (1/s).
     #[serde(default)]
     pub angular_damping: f64,
     /// `KinematicPosition` only: keyframes in increasing time; the body starts at the first.
@@ -159,6 +181,7 @@ pub enum ParticleRef {
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct AttachmentDef {
+    /// The particle held.
     pub particle: ParticleRef,
     /// Index into `bodies`.
     pub body: usize,

@@ -140,7 +140,7 @@ pub fn run_state(sim: &mut Simulation, frames: usize) -> Vec<DVec3> {
 /// Every `scenes/hard/` case (64 files), sorted, with its largest strain over its full run
 /// under `integrator` (`None`: the scene's own settings) and the substeps it ran with.
 pub fn hard_cases_max_strain(integrator: Option<&str>) -> Vec<(std::path::PathBuf, f64, u32)> {
-    let mut files: Vec<_> = std::fs::read_dir("scenes/hard")
+    let mut files: Vec<_> = std::fs::read_dir(repo_root().join("scenes/hard"))
         .unwrap()
         .map(|e| e.unwrap().path())
         .collect();
@@ -165,4 +165,13 @@ pub fn hard_cases_max_strain(integrator: Option<&str>) -> Vec<(std::path::PathBu
             (path, max_strain, substeps)
         })
         .collect()
+}
+
+/// The repository's root (where `scenes/` is), from the engine's tests and the lab's alike.
+pub fn repo_root() -> std::path::PathBuf {
+    let here = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    here.ancestors()
+        .find(|d| d.join("scenes").is_dir())
+        .unwrap_or(here)
+        .to_path_buf()
 }

@@ -1,0 +1,21 @@
+//! # harmonic-lab
+//!
+//! The measuring apparatus of `harmonic`, kept out of the engine a game embeds: speed against
+//! error ([`accuracy`]), the hard-case stability suite ([`stability`]), static equilibria
+//! ([`statics`]), step throughput ([`throughput`]), rapier 0.36's soft-body cloth as a peer
+//! ([`peer`]) and the GPU bench (`gpu_bench`). The `harmonic-lab` binary runs them; the figures
+//! they write are in `BENCHMARKS.md` and `STABILITY.md` beside this crate.
+//!
+//! It uses the engine through its public API and, where it needs the packed buffers and the
+//! kernels themselves, through `harmonic::internals`.
+
+// A harness over scenes it generates itself: a failure there is a bug in the harness.
+#![allow(clippy::expect_used, clippy::unwrap_used)]
+
+pub mod accuracy;
+#[cfg(feature = "gpu")]
+pub mod gpu_bench;
+pub mod peer;
+pub mod stability;
+pub mod statics;
+pub mod throughput;

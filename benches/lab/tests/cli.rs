@@ -1,0 +1,75 @@
+//! The `harmonic-lab` binary end to end.
+
+use std::process::Command;
+
+fn harmonic_lab(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_harmonic-lab"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn bench_runs_only_what_is_selected() {
+    let dir = std::env::temp_dir().join(format!("harmonic-bench-{}", std::process::id()));
+    let out = harmonic_lab(&[
+        "bench",
+        "--quick",
+        "--scenes",
+        "chain20",
+        "--integrators",
+        "symplectic-euler,theta-mg",
+        "--steps",
+        "1500,3000",
+        "--repeats",
+        "1",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let csv = std::fs::read_to_string(dir.join("bench.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    // Two integrators at two steps, plus any edge the bisection finds between them.
+    assert!(rows.len() >= 4, "{csv}");
+    for row in &rows {
+        assert!(row.starts_with("chain20,"), "{row}");
+        assert!(
+            row.contains(",symplectic-euler,") || row.contains(",theta-mg,"),
+            "{row}"
+        );
+    }
+    for name in ["symplectic-euler", "theta-mg"] {
+        for steps in ["1500", "3000"] {
+            assert!(
+                rows.iter()
+                    .any(|r| r.contains(&format!(",{name},{steps},"))),
+                "{name} at {steps}: {csv}"
+            );
+        }
+    }
+    assert!(
+        !stdout.contains("cloth16") && !stdout.contains("rapier"),
+        "{stdout}"
+    );
+    assert!(dir.join("chain20.svg").exists() && !dir.join("cloth16.svg").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+
+    let unknown = harmonic_lab(&["bench", "--quick", "--scenes", "cloth128"]);
+    assert_eq!(unknown.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&unknown.stderr);
+    assert!(
+        stderr.contains("--scenes cloth128: the bench's scenes are chain20, cloth16"),
+        "{stderr}"
+    );
+    let zero = harmonic_lab(&["bench", "--steps", "0"]);
+    assert_eq!(zero.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&zero.stderr).contains("--steps"));
+    let bad = harmonic_lab(&["bench", "--integrators", "leapfrog"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown integrator `leapfrog`"));
+}

@@ -1,0 +1,254 @@
+//! What a simulation is configured with: the integrator, the back end and the step. The bottom
+//! layer: every other module may import it, it imports only the errors.
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::DVec3;
+
+use crate::error::SimError;
+
+/// The integrators, all over the same packed buffers. The research ones
+/// ([`Integrator::is_research`]) stay selectable by name for comparison and study; a game picks
+/// among the others.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Integrator {
+    /// The corrected closed-form spring step, summed per particle (Jacobi).
+    Harmonic,
+    /// Research: the paper's equations as printed, for comparison only.
+    HarmonicPaper,
+    /// `v += a h; x += v h`. The default: fastest at ≤ 1 cm error on the 128×128 cloth
+    /// (`harmonic-lab bench`, benches/lab/BENCHMARKS.md).
+    #[default]
+    SymplecticEuler,
+    /// `x += v h; v += a h`.
+    ExplicitEuler,
+    /// Research: classical fourth-order Runge–Kutta, the fine-step reference.
+    Rk4,
+    /// The closed form applied spring by spring in Gauss–Seidel order over a colouring.
+    HarmonicGs,
+    /// Research: each spring's oscillator forced by the other forces, frozen at the start of
+    /// the step.
+    HarmonicForced,
+    /// Research: forced, in Gauss–Seidel order.
+    HarmonicForcedGs,
+    /// Research: symmetric Gauss–Seidel, a forward then a backward colour sweep, each applying half of
+    /// the closed-form impulse for the full step.
+    HarmonicSgs,
+    /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
+    ImplicitEuler,
+    /// Small-step XPBD, one iteration per substep.
+    Xpbd,
+    /// A θ-step (θ = 0.6) solved by one multigrid V-cycle: stable at any step, for steps far
+    /// past the explicit integrators' limits.
+    ThetaMg,
+}
+
+impl Integrator {
+    /// Whether it is a research variant, kept for comparison and study rather than for games:
+    /// the paper's printed equations, the forced and symmetric closed-form variants, and the
+    /// RK4 reference.
+    pub fn is_research(self) -> bool {
+        matches!(
+            self,
+            Integrator::HarmonicPaper
+                | Integrator::HarmonicForced
+                | Integrator::HarmonicForcedGs
+                | Integrator::HarmonicSgs
+                | Integrator::Rk4
+        )
+    }
+
+    /// Every integrator, in the order messages list their names.
+    pub const ALL: [Integrator; 12] = [
+        Integrator::Harmonic,
+        Integrator::HarmonicGs,
+        Integrator::HarmonicSgs,
+        Integrator::HarmonicForced,
+        Integrator::HarmonicForcedGs,
+        Integrator::HarmonicPaper,
+        Integrator::SymplecticEuler,
+        Integrator::ExplicitEuler,
+        Integrator::ImplicitEuler,
+        Integrator::Xpbd,
+        Integrator::ThetaMg,
+        Integrator::Rk4,
+    ];
+
+    /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are on the CPU,
+    /// with no memory per spring (`harmonic` only without exact displacement); the others get
+    /// the cloths' springs expanded one by one.
+    pub fn runs_on_grids(self, exact_displacement: bool) -> bool {
+        match self {
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler => true,
+            Integrator::Harmonic => !exact_displacement,
+            _ => false,
+        }
+    }
+
+    /// Whether the GPU's `grid_pass` steps its cloth grids whole: the Euler integrators, and
+    /// the closed form (its device kernel has no exact displacement).
+    pub fn runs_on_gpu_grids(self) -> bool {
+        matches!(
+            self,
+            Integrator::SymplecticEuler | Integrator::ExplicitEuler | Integrator::Harmonic
+        )
+    }
+
+    /// Whether its spring step is the closed-form oscillator (the harmonic family), whose
+    /// impulse vanishes or reverses at whole multiples of a spring's `h_c`.
+    pub fn uses_closed_form(self) -> bool {
+        matches!(
+            self,
+            Integrator::Harmonic
+                | Integrator::HarmonicPaper
+                | Integrator::HarmonicGs
+                | Integrator::HarmonicSgs
+                | Integrator::HarmonicForced
+                | Integrator::HarmonicForcedGs
+        )
+    }
+
+    /// Whether it applies the closed form spring by spring in colour order (Gauss–Seidel).
+    pub(crate) fn sweeps(self) -> bool {
+        matches!(
+            self,
+            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
+        )
+    }
+
+    /// Whether it needs the springs' colouring (the Gauss–Seidel sweeps and XPBD).
+    pub fn needs_colouring(self) -> bool {
+        self.sweeps() || self == Integrator::Xpbd
+    }
+
+    /// Its name in scene files and on the command line (`symplectic-euler`), also its `Display`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Integrator::Harmonic => "harmonic",
+            Integrator::HarmonicPaper => "harmonic-paper",
+            Integrator::SymplecticEuler => "symplectic-euler",
+            Integrator::ExplicitEuler => "explicit-euler",
+            Integrator::Rk4 => "rk4",
+            Integrator::HarmonicGs => "harmonic-gs",
+            Integrator::HarmonicSgs => "harmonic-sgs",
+            Integrator::HarmonicForced => "harmonic-forced",
+            Integrator::HarmonicForcedGs => "harmonic-forced-gs",
+            Integrator::ImplicitEuler => "implicit-euler",
+            Integrator::Xpbd => "xpbd",
+            Integrator::ThetaMg => "theta-mg",
+        }
+    }
+}
+
+impl fmt::Display for Integrator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Integrator {
+    type Err = SimError;
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        Integrator::ALL
+            .into_iter()
+            .find(|i| i.name() == s)
+            .ok_or_else(|| SimError::UnknownIntegrator(s.to_string()))
+    }
+}
+
+/// Where the step runs. The default is the CPU: it is what every machine has, and a software
+/// GPU adapter (lavapipe, llvmpipe) is slower than the CPU kernel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Backend {
+    /// The rayon kernel on f64 state.
+    #[default]
+    Cpu,
+    /// The WGSL kernel through wgpu on f32 state; an error when no adapter exists (a software
+    /// adapter is accepted) or the integrator has no GPU kernel.
+    Gpu,
+    /// A hardware GPU when one is present and the integrator has a GPU kernel, else the CPU.
+    /// Never picks a software adapter.
+    Auto,
+}
+
+impl Backend {
+    /// Every back end.
+    pub const ALL: [Backend; 3] = [Backend::Cpu, Backend::Gpu, Backend::Auto];
+
+    /// Its name in scene files and on the command line (`cpu`, `gpu`, `auto`), also its `Display`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu => "gpu",
+            Backend::Auto => "auto",
+        }
+    }
+}
+
+impl fmt::Display for Backend {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Backend {
+    type Err = SimError;
+    fn from_str(s: &str) -> Result<Self, SimError> {
+        Backend::ALL
+            .into_iter()
+            .find(|b| b.name() == s)
+            .ok_or_else(|| SimError::UnknownBackend(s.to_string()))
+    }
+}
+
+/// How a simulation steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SimConfig {
+    /// Frame step (s).
+    pub dt: f64,
+    /// Substeps per frame; the integrator's step is `h = dt / substeps`. With
+    /// `auto_substeps` this is chosen at every gather and on [`Simulation::set_config`].
+    pub substeps: u32,
+    /// Choose `substeps` from the network's highest frequency and the integrator's measured
+    /// stability region ([`crate::step_control`]).
+    pub auto_substeps: bool,
+    /// Gravitational acceleration (m/s²).
+    pub gravity: DVec3,
+    /// The integrator every substep uses.
+    pub integrator: Integrator,
+    /// Harmonic only: move positions by each spring's closed-form displacement too.
+    pub exact_displacement: bool,
+    /// Where the integrate stage runs.
+    pub backend: Backend,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            dt: 1.0 / 60.0,
+            substeps: 1,
+            auto_substeps: true,
+            gravity: DVec3::new(0.0, -9.81, 0.0),
+            integrator: Integrator::default(),
+            exact_displacement: false,
+            backend: Backend::Cpu,
+        }
+    }
+}
+
+impl SimConfig {
+    /// The integrator's step `h = dt / substeps` (s).
+    pub fn h(&self) -> f64 {
+        self.dt / self.substeps as f64
+    }
+    pub(crate) fn check(&self) -> Result<(), SimError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(SimError::BadStep(self.dt));
+        }
+        if self.substeps == 0 {
+            return Err(SimError::NoSubsteps);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,390 @@
+//! The GPU step: substeps encoded into one submit, the state read back on request.
+
+use super::*;
+
+/// The GPU step over one scene.
+pub struct GpuSolver {
+    pub(super) ctx: Arc<GpuContext>,
+    pub(super) module: wgpu::ShaderModule,
+    pub(super) layout: wgpu::BindGroupLayout,
+    pub(super) pipeline_layout: wgpu::PipelineLayout,
+    pub(super) pipelines: Option<Pipelines>,
+    pub(super) buffers: Option<Buffers>,
+    pub(super) kernel: Kernel,
+    /// Whether to specialise the shader to the scene (off only to measure what it buys).
+    pub specialise: bool,
+    /// The host copy of the spring coefficients, in device order, for step changes.
+    pub(super) host_coefs: Vec<Coef>,
+    /// The grids step under the closed form (`grid::GridLaw::Harmonic`), not Euler.
+    pub(super) harmonic_grids: bool,
+    /// Host scratch for state uploads.
+    pub(super) host_pos: Vec<Position>,
+    pub(super) host_vel: Vec<[f32; 4]>,
+    pub(super) h: f32,
+    /// The contact stage on the device, when the scene's colliders allow it.
+    pub(super) contacts: Option<contacts::DeviceContacts>,
+}
+
+impl GpuSolver {
+    pub fn new(ctx: Arc<GpuContext>, kernel: Kernel) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let (module, layout, pipeline_layout) = ctx.scoped("shader module", || {
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("integrate.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(SHADER.into()),
+            });
+            let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Storage { read_only },
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+            let uniform = |binding, dynamic| wgpu::BindGroupLayoutEntry {
+                binding,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: dynamic,
+                    min_binding_size: None,
+                },
+                count: None,
+            };
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("integrate"),
+                entries: &[
+                    uniform(0, false),
+                    storage(1, false),
+                    storage(2, false),
+                    storage(3, true),
+                    storage(4, true),
+                    storage(5, false),
+                    storage(6, true),
+                    storage(7, true),
+                    uniform(8, true),
+                ],
+            });
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("integrate"),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
+            (module, layout, pipeline_layout)
+        })?;
+        Ok(Self {
+            ctx,
+            module,
+            layout,
+            pipeline_layout,
+            pipelines: None,
+            buffers: None,
+            kernel,
+            specialise: true,
+            host_coefs: Vec::new(),
+            harmonic_grids: false,
+            host_pos: Vec::new(),
+            host_vel: Vec::new(),
+            h: f32::NAN,
+            contacts: None,
+        })
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
+
+    /// The specialisation the pipelines were built for (after an upload).
+    pub fn specialisation(&self) -> Option<Specialisation> {
+        self.pipelines.as_ref().map(|p| p.spec)
+    }
+
+    /// A new step `h` with its coefficients: rewrites `h` and the springs' coefficients only.
+    pub fn set_step(&mut self, packed: &Packed, lin: &[Linear], h: f64) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        if self.h == h as f32 {
+            return Ok(());
+        }
+        let springs = packed.colouring.springs.len();
+        for (c, &k) in self.host_coefs.iter_mut().zip(&packed.colouring.springs) {
+            c.p = lin[k as usize].p as f32;
+            c.q = lin[k as usize].q as f32;
+        }
+        self.host_coefs.truncate(springs);
+        self.host_coefs
+            .extend(grid_device(packed, h, self.harmonic_grids).1);
+        let q = &self.ctx.queue;
+        q.write_buffer(&b.coefs, 0, bytemuck::cast_slice(&self.host_coefs));
+        // h is the 4th f32 of Params.
+        q.write_buffer(&b.params, 12, bytemuck::bytes_of(&(h as f32)));
+        self.h = h as f32;
+        Ok(())
+    }
+
+    /// Puts the contact stage on the device over the state uploaded last (call after each
+    /// upload and step change); every substep then ends with the contact pass.
+    pub fn enable_contacts(&mut self, setup: &contacts::ContactSetup<'_>) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        self.contacts = Some(contacts::DeviceContacts::new(
+            &self.ctx, &b.pos, &b.vel, setup,
+        )?);
+        Ok(())
+    }
+
+    /// The device contact stage, when enabled.
+    pub fn contacts(&mut self) -> Option<&mut contacts::DeviceContacts> {
+        self.contacts.as_mut()
+    }
+
+    /// Waits for the queued work; the contact partials of slots `first..first + count`.
+    pub fn read_partials(
+        &mut self,
+        first: u32,
+        count: u32,
+    ) -> Result<&[contacts::Partial], GpuError> {
+        match &mut self.contacts {
+            Some(c) => c.read(&self.ctx, first, count),
+            None => Ok(&[]),
+        }
+    }
+
+    /// Encodes `substeps` substeps into one submit. Nothing is read back.
+    pub fn run(&mut self, substeps: u32) -> Result<(), GpuError> {
+        self.run_slots(0, substeps)
+    }
+
+    /// As [`Self::run`], the substeps using contact slots `first..first + substeps`.
+    pub fn run_slots(&mut self, first: u32, substeps: u32) -> Result<(), GpuError> {
+        let (Some(b), Some(p)) = (&self.buffers, &self.pipelines) else {
+            return Ok(());
+        };
+        let contacts = self.contacts.as_ref();
+        if let Some(c) = contacts {
+            c.flush(&self.ctx.queue);
+        }
+        let kernel = self.kernel;
+        let ctx = &self.ctx;
+        ctx.scoped("step", || {
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("step"),
+                });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("substeps"),
+                    timestamp_writes: None,
+                });
+                for s in 0..substeps {
+                    pass.set_bind_group(0, &b.bind_group, &[0]);
+                    match kernel {
+                        Kernel::Jacobi => {
+                            pass.set_pipeline(&p.spring_pass);
+                            dispatch(&mut pass, b.springs_len);
+                            if !b.grids.is_empty() {
+                                pass.set_pipeline(&p.grid_pass);
+                                for (g, &(_, count)) in b.grids.iter().enumerate() {
+                                    let at = (b.colours.len() + g) as u32 * b.colour_stride;
+                                    pass.set_bind_group(0, &b.bind_group, &[at]);
+                                    dispatch(&mut pass, count);
+                                }
+                                pass.set_bind_group(0, &b.bind_group, &[0]);
+                            }
+                            pass.set_pipeline(&p.particle_pass);
+                            dispatch(&mut pass, b.particles);
+                        }
+                        Kernel::GaussSeidel { sweeps } => {
+                            pass.set_pipeline(&p.add_gravity);
+                            dispatch(&mut pass, b.particles);
+                            pass.set_pipeline(&p.sweep_colour);
+                            for sweep in 0..sweeps {
+                                let n = b.colours.len();
+                                for i in 0..n {
+                                    let c = if sweep % 2 == 1 { n - 1 - i } else { i };
+                                    let offset = c as u32 * b.colour_stride;
+                                    pass.set_bind_group(0, &b.bind_group, &[offset]);
+                                    dispatch(&mut pass, b.colours[c].1);
+                                }
+                            }
+                            pass.set_bind_group(0, &b.bind_group, &[0]);
+                            pass.set_pipeline(&p.drift);
+                            dispatch(&mut pass, b.particles);
+                        }
+                    }
+                    if let Some(c) = contacts {
+                        c.encode(&mut pass, first + s);
+                    }
+                }
+            }
+            ctx.queue.submit([encoder.finish()]);
+        })
+    }
+
+    /// Waits for the queued work and copies positions and velocities into `packed`
+    /// (pinned particles included: the kernels never write them).
+    pub fn read_back(&mut self, packed: &mut Packed) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        let n = b.particles as usize;
+        let pos_bytes = (n * std::mem::size_of::<Position>()) as u64;
+        let vel_bytes = (n * 16) as u64;
+        if n == 0 {
+            return Ok(());
+        }
+        let total = pos_bytes + vel_bytes;
+        read_staging(
+            &self.ctx,
+            "read back",
+            &b.staging,
+            total,
+            |encoder| {
+                encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
+                encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
+            },
+            |bytes| {
+                let pos: &[Position] = bytemuck::cast_slice(&bytes[..pos_bytes as usize]);
+                let vel: &[[f32; 4]] = bytemuck::cast_slice(&bytes[pos_bytes as usize..]);
+                for (x, p) in packed.x.iter_mut().zip(pos) {
+                    *x = p.to_f64();
+                }
+                for (v, w) in packed.v.iter_mut().zip(vel) {
+                    *v = DVec3::new(w[0].into(), w[1].into(), w[2].into());
+                }
+            },
+        )
+    }
+
+    /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts),
+    /// through host scratch sized at gather.
+    pub fn write_state(&mut self, packed: &Packed) {
+        if let Some(b) = &self.buffers {
+            fill_state(packed, &mut self.host_pos, &mut self.host_vel);
+            let q = &self.ctx.queue;
+            q.write_buffer(&b.pos, 0, bytemuck::cast_slice(&self.host_pos));
+            q.write_buffer(&b.vel, 0, bytemuck::cast_slice(&self.host_vel));
+        }
+    }
+
+    /// Blocks until the queued substeps have run.
+    pub fn finish(&self) -> Result<(), GpuError> {
+        self.ctx
+            .device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
+    }
+
+    /// Overwrites the per-spring output buffer with NaN, so an element a pass fails to write
+    /// shows up as a non-finite state (the parity tests call this before each run).
+    pub fn poison(&mut self) {
+        if let Some(b) = &self.buffers {
+            let bytes = poison(b.springs_len as usize * 16);
+            self.ctx.queue.write_buffer(&b.sdv, 0, &bytes);
+            // And the grid particles' sums (the other particles' stay zero: no pass writes them).
+            for &(first, count) in &b.grids {
+                let at = (u64::from(b.springs_len) + u64::from(first)) * 16;
+                let bytes = poison(count as usize * 16);
+                self.ctx.queue.write_buffer(&b.sdv, at, &bytes);
+            }
+        }
+    }
+
+    /// Bytes the kernels move per substep at best (each element read or written once),
+    /// for the memory-bound floor: see BENCHMARKS.md.
+    pub fn bytes_per_substep(&self) -> u64 {
+        let Some(b) = &self.buffers else { return 0 };
+        let (n, m) = (b.particles as u64, b.springs_len as u64);
+        let spec = self.specialisation();
+        let rate = spec.is_none_or(|s| s.rate);
+        let pos = std::mem::size_of::<Position>() as u64;
+        match self.kernel {
+            Kernel::Jacobi => {
+                // Spring pass: spring, two positions (and velocities), one sdv write.
+                // Particle pass: offsets, entries, sdv reads, position and velocity in and out.
+                let spring_pass = m * (8 + 16 + 16) + n * (pos + if rate { 16 } else { 0 });
+                let particle_pass = n * (4 + 2 * pos + 2 * 16) + 2 * m * (8 + 16);
+                // Grid pass: each grid particle's position and velocity read (its neighbours'
+                // from cache), its sum written, then read by the particle pass.
+                let g: u64 = b.grids.iter().map(|&(_, c)| u64::from(c)).sum();
+                let grid_pass = g * (pos + 16 + 16 + 16);
+                spring_pass + grid_pass + particle_pass
+            }
+            Kernel::GaussSeidel { sweeps } => {
+                let sweep = m * (8 + 16) + n * (pos + 2 * 16);
+                n * 2 * 16 + sweeps as u64 * sweep + n * (2 * pos + 16)
+            }
+        }
+    }
+}
+
+/// Encodes `copy` into `staging`, submits it, waits, and hands the first `bytes` of `staging`
+/// to `read`: every read-back from the device goes through here.
+pub(crate) fn read_staging(
+    ctx: &GpuContext,
+    what: &str,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    copy: impl FnOnce(&mut wgpu::CommandEncoder),
+    read: impl FnOnce(&[u8]),
+) -> Result<(), GpuError> {
+    ctx.scoped(what, || {
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
+        copy(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+    })?;
+    let failed = |e: &dyn std::fmt::Display| GpuError::Readback(e.to_string());
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging
+        .slice(..bytes)
+        .map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| failed(&e))?;
+    match rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(failed(&e)),
+        Err(e) => return Err(failed(&e)),
+    }
+    {
+        let view = staging.get_mapped_range(..bytes).map_err(|e| failed(&e))?;
+        read(&view);
+    }
+    staging.unmap();
+    Ok(())
+}
+
+/// `len` bytes of f32 NaN.
+pub(super) fn poison(len: usize) -> Vec<u8> {
+    f32::NAN
+        .to_le_bytes()
+        .iter()
+        .copied()
+        .cycle()
+        .take(len)
+        .collect()
+}
+
+/// One invocation per element, over a 2-D grid of workgroups when one dimension is not enough.
+pub(super) fn dispatch(pass: &mut wgpu::ComputePass<'_>, count: u32) {
+    if count == 0 {
+        return;
+    }
+    let groups = count.div_ceil(WORKGROUP);
+    let x = groups.min(MAX_GROUPS);
+    pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
+}

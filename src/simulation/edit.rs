@@ -1,0 +1,217 @@
+//! Run-time edits: grabbing, pinning, adding and removing cloths and bodies.
+
+use super::*;
+
+/// Contacts run on the CPU. Under `auto` a scene with props runs there entirely; under `gpu`
+/// the springs run on the GPU and the state makes a round trip every substep for the contacts.
+/// A part added at run time, checked as the one entry of an otherwise empty scene, so its
+/// errors name it as a scene file's would (`add_cloth: cloths[0].resolution: ...`).
+pub(super) fn valid_part(scene: &Scene, what: &str) -> Result<(), Error> {
+    let issues = scene.validate();
+    if issues.is_empty() {
+        Ok(())
+    } else {
+        Err(crate::SceneError::Invalid {
+            path: what.into(),
+            issues,
+        }
+        .into())
+    }
+}
+
+impl Simulation {
+    /// Holds particle `index` (scene order) at `target`, at rest: the mouse drag of a viewer,
+    /// a hand picking cloth up. A free particle is pinned until [`Self::release`]; a pinned
+    /// one is moved. Re-gathers on the next step (like any World change).
+    pub fn grab(&mut self, index: usize, target: DVec3) -> Result<(), SimError> {
+        if !target.is_finite() {
+            return Err(SimError::BadPosition(target));
+        }
+        let entity = self.particle_entity(index)?;
+        if self.world.get::<&Pin>(entity).is_err() {
+            self.world
+                .insert_one(entity, Pin)
+                .map_err(|_| SimError::NoParticle { index })?;
+            self.grabbed.push(entity);
+        }
+        if let Ok(mut p) = self.world.get::<&mut crate::Particle>(entity) {
+            p.position = target;
+            p.velocity = DVec3::ZERO;
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Lets go of a particle [`Self::grab`] pinned (one pinned by its scene stays pinned).
+    pub fn release(&mut self, index: usize) -> Result<(), SimError> {
+        let entity = self.particle_entity(index)?;
+        if let Some(k) = self.grabbed.iter().position(|&e| e == entity) {
+            self.grabbed.swap_remove(k);
+            let _ = self.world.remove_one::<Pin>(entity);
+            self.dirty = true;
+        }
+        Ok(())
+    }
+
+    /// The cloths, each with its particles' range in scene order (see [`Self::positions`]);
+    /// a cloth whose [`ClothSprings`] were despawned through [`Self::world_mut`] is left out.
+    pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
+        self.cloths.iter().filter_map(|&(id, e)| {
+            let r = grid_of(&self.world, e)?.range();
+            Some((id, r.start as usize..r.end as usize))
+        })
+    }
+
+    /// Adds a cloth, validated as a scene's would be, after every particle of the scene
+    /// (scene order); its triangles join [`Self::triangles`]. Re-gathers on the next step.
+    pub fn add_cloth(&mut self, cloth: &crate::scene::Cloth) -> Result<ClothId, Error> {
+        let mut check = Scene::new(self.config.dt);
+        check.cloths.push(cloth.clone());
+        valid_part(&check, "add_cloth")?;
+        let first = self
+            .world
+            .query::<&SceneIndex>()
+            .iter()
+            .map(|i| i.0 + 1)
+            .max()
+            .unwrap_or(0);
+        let e = crate::scene::spawn_cloth(&mut self.world, first, cloth);
+        let id = ClothId(self.next_cloth);
+        self.next_cloth += 1;
+        self.cloths.push((id, e));
+        if let (Some(custom), Some(grid)) = (&mut self.frame.custom, grid_of(&self.world, e)) {
+            grid.triangles(custom);
+        }
+        self.frame.triangles.take();
+        self.dirty = true;
+        Ok(id)
+    }
+
+    /// Removes a cloth: its particles, every spring touching them, their pins and attachments
+    /// and its triangles. Later particles move up in scene order to close the gap.
+    /// [`SimError::UnknownCloth`] if there is no such cloth, or if its [`ClothSprings`] were
+    /// despawned through [`Self::world_mut`] (its particles are then ordinary particles).
+    pub fn remove_cloth(&mut self, id: ClothId) -> Result<(), SimError> {
+        let k = self
+            .cloths
+            .iter()
+            .position(|(c, _)| *c == id)
+            .ok_or(SimError::UnknownCloth)?;
+        let (_, e) = self.cloths.remove(k);
+        let grid = grid_of(&self.world, e);
+        // Its springs' component removed by hand: the particles are no longer a cloth.
+        let grid = grid.ok_or(SimError::UnknownCloth)?;
+        // A built cloth's indices fit u32 (validated).
+        let range = grid.range();
+        let range = range.start as u32..range.end as u32;
+        let n = range.end - range.start;
+        let doomed: std::collections::HashSet<Entity> = self
+            .world
+            .query::<(Entity, &SceneIndex)>()
+            .iter()
+            .filter(|(_, i)| range.contains(&i.0))
+            .map(|(e, _)| e)
+            .collect();
+        let mut springs: Vec<Entity> = self
+            .world
+            .query::<(Entity, &crate::Spring)>()
+            .iter()
+            .filter(|(_, s)| doomed.contains(&s.a) || doomed.contains(&s.b))
+            .map(|(e, _)| e)
+            .collect();
+        // Cloth springs over any of its particles go too; later ones move up with theirs.
+        let (lo, hi) = (range.start as u64, range.end as u64);
+        for (e, c) in self.world.query_mut::<(Entity, &mut ClothSprings)>() {
+            let r = c.grid.range();
+            if r.start < hi && lo < r.end {
+                springs.push(e);
+            } else if r.start >= hi {
+                c.grid.first -= n;
+            }
+        }
+        for e in springs.into_iter().chain(doomed.iter().copied()) {
+            let _ = self.world.despawn(e);
+        }
+        self.grabbed.retain(|e| !doomed.contains(e));
+        for i in self.world.query_mut::<&mut SceneIndex>() {
+            if i.0 >= range.end {
+                i.0 -= n;
+            }
+        }
+        if let Some(custom) = &mut self.frame.custom {
+            custom.retain(|t| !t.iter().any(|i| range.contains(i)));
+            for t in custom.iter_mut() {
+                for i in t.iter_mut() {
+                    if *i >= range.end {
+                        *i -= n;
+                    }
+                }
+            }
+        }
+        self.frame.triangles.take();
+        self.frame.prev.clear();
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Adds a rigid body, validated as a scene's would be. The first body of a simulation
+    /// without any brings the rapier world and the contact stage (default contact material,
+    /// see [`Self::set_contact_material`]).
+    pub fn add_body(
+        &mut self,
+        body: &crate::scene::props::BodyDef,
+    ) -> Result<crate::contacts::RigidProp, Error> {
+        let mut check = Scene::new(self.config.dt);
+        check.bodies.push(body.clone());
+        valid_part(&check, "add_body")?;
+        if self.props.is_none() {
+            let (props, _) = Props::build(&[], self.contact, self.config.gravity, &mut self.world)
+                .map_err(|e| SimError::BadBody(e.to_string()))?;
+            self.props = Some(props);
+        }
+        let props = self.props.as_mut().ok_or(SimError::UnknownBody)?;
+        let prop = props
+            .add_body(body, &mut self.world)
+            .map_err(SimError::BadBody)?;
+        self.dirty = true;
+        Ok(prop)
+    }
+
+    /// Removes a body with its collider; particles attached to it go free.
+    pub fn remove_body(&mut self, prop: crate::contacts::RigidProp) -> Result<(), SimError> {
+        let props = self.props.as_mut().ok_or(SimError::UnknownBody)?;
+        if !props.remove_body(prop.body, &mut self.world) {
+            return Err(SimError::UnknownBody);
+        }
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Pins particle `index` (scene order) where it is. Re-gathers on the next step.
+    pub fn pin(&mut self, index: usize) -> Result<(), SimError> {
+        let e = self.particle_entity(index)?;
+        let _ = self.world.insert_one(e, Pin);
+        self.grabbed.retain(|g| *g != e);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Frees particle `index` (scene order) from its pin.
+    pub fn unpin(&mut self, index: usize) -> Result<(), SimError> {
+        let e = self.particle_entity(index)?;
+        let _ = self.world.remove_one::<Pin>(e);
+        self.grabbed.retain(|g| *g != e);
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// The entity of particle `index` in scene order.
+    pub fn particle_entity(&self, index: usize) -> Result<Entity, SimError> {
+        self.packed
+            .entities
+            .get(index)
+            .copied()
+            .filter(|&e| self.world.contains(e))
+            .ok_or(SimError::NoParticle { index })
+    }
+}

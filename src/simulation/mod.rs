@@ -1,0 +1,368 @@
+//! The `Simulation` facade: a World, its packed buffers and the schedule that steps them.
+//!
+//! The step order is in one function, `Simulation::step_coupled` (`step.rs`); the game-loop
+//! frame, run-time edits, the quarantine and the coupling with rigid bodies each have a file.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use glam::{DVec3, Vec3};
+use hecs::{Entity, World};
+
+use crate::buffers::{GatherOptions, Packed};
+use crate::components::{ClothGrid, ClothSprings, Pin, Quarantined, SceneIndex};
+use crate::config::{Backend, SimConfig};
+use rapier3d::prelude::{ColliderSet, RigidBodySet};
+
+use crate::contacts::{ContactStage, ContactStats, Props};
+use crate::error::{Error, SimError};
+use crate::integrate::Solver;
+use crate::metrics;
+use crate::scene::props::ContactDef;
+use crate::scene::{Limits, Scene};
+use crate::schedule::StepStats;
+use crate::step_control::{self, StepChoice};
+
+mod coupling;
+mod edit;
+mod frame;
+mod quarantine;
+mod step;
+
+#[cfg(feature = "gpu")]
+use coupling::device_frame;
+use coupling::Coupling;
+use frame::{grid_of, Frame};
+pub use frame::{Advance, RenderView};
+use quarantine::contain;
+
+/// Live figures of the current state.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Diagnostics {
+    /// Kinetic + spring + gravitational energy (J).
+    pub energy: f64,
+    /// Largest `|δ|/l0`.
+    pub max_strain: f64,
+    /// `h/h_c` of the stiffest spring (`h_c = π/ω0`).
+    pub step_ratio: f64,
+    /// Particles whose position or velocity is not finite: 0 after every step, which
+    /// quarantines such particles (non-zero only for a state set from outside since).
+    pub non_finite: usize,
+    /// Particles in quarantine ([`Simulation::quarantined`]).
+    pub quarantined: usize,
+}
+
+/// A mass-spring simulation over a hecs World.
+pub struct Simulation {
+    world: World,
+    config: SimConfig,
+    packed: Packed,
+    solver: Solver,
+    dirty: bool,
+    /// The automatic step choice, when `auto_substeps` is on.
+    choice: Option<StepChoice>,
+    /// Whether the passes run on rayon's pool (large scenes only).
+    parallel: bool,
+    steps: u64,
+    time: f64,
+    stats: StepStats,
+    /// The GPU step, when the backend resolved to the GPU.
+    #[cfg(feature = "gpu")]
+    gpu: Option<crate::gpu::GpuSolver>,
+    /// Rigid props and the contact stage; None for a scene without bodies.
+    props: Option<Props>,
+    /// The contact stage against the caller's rapier sets ([`Simulation::step_with`]).
+    user_stage: Option<ContactStage>,
+    /// Host scratch for the device contact stage's colliders.
+    #[cfg(feature = "gpu")]
+    device_scratch: Vec<crate::gpu::contacts::Collider>,
+    /// The cloth's contact material for [`Simulation::step_with`].
+    contact: ContactDef,
+    /// The game-loop side: fixed-step accumulator and render buffers.
+    frame: Frame,
+    /// Particles held by [`Simulation::grab`] that were free before.
+    grabbed: Vec<Entity>,
+    /// The cloths as units: each one's entity, whose [`ClothSprings`] holds its grid.
+    cloths: Vec<(ClothId, Entity)>,
+    next_cloth: u32,
+    /// Particles found non-finite during the current frame (packed indices, may repeat).
+    contained: Vec<usize>,
+    /// Particles quarantined since the last frame's statistics.
+    newly_quarantined: usize,
+}
+
+/// A cloth of the simulation (from its scene or added at run time), to remove it by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ClothId(u32);
+
+/// The GPU solver a config asks for: `None` runs on the CPU.
+#[cfg(feature = "gpu")]
+fn gpu_solver(config: &SimConfig) -> Result<Option<crate::gpu::GpuSolver>, SimError> {
+    use crate::gpu::{GpuContext, GpuSolver, Kernel};
+    let kernel = Kernel::of(config.integrator, config.exact_displacement);
+    match (config.backend, kernel) {
+        (Backend::Cpu, _) | (Backend::Auto, None) => Ok(None),
+        (Backend::Gpu, None) => Err(no_kernel(config)),
+        (Backend::Gpu, Some(k)) => Ok(Some(GpuSolver::new(GpuContext::shared(true)?, k)?)),
+        (Backend::Auto, Some(k)) => Ok(GpuContext::shared(false)
+            .ok()
+            .map(|ctx| GpuSolver::new(ctx, k))
+            .transpose()?),
+    }
+}
+
+fn props_backend(asked: Backend) -> Backend {
+    match asked {
+        Backend::Auto => Backend::Cpu,
+        b => b,
+    }
+}
+
+/// A build without the `gpu` feature refuses `Backend::Gpu` (`auto` falls back to the CPU).
+#[cfg(not(feature = "gpu"))]
+fn refuse_gpu(config: &SimConfig) -> Result<(), SimError> {
+    if config.backend == Backend::Gpu {
+        return Err(crate::error::GpuError::NotBuilt.into());
+    }
+    Ok(())
+}
+
+#[cfg(feature = "gpu")]
+fn no_kernel(config: &SimConfig) -> SimError {
+    let supported = crate::gpu::Kernel::supported()
+        .map(|i| i.name())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let extra = if config.integrator == crate::Integrator::Harmonic {
+        " (harmonic runs on the GPU without exact_displacement)"
+    } else {
+        ""
+    };
+    crate::error::GpuError::NoKernel {
+        integrator: config.integrator,
+        supported,
+        extra,
+    }
+    .into()
+}
+
+impl Simulation {
+    /// Takes a World of [`crate::Particle`], [`crate::Spring`] and [`crate::Pin`] components.
+    pub fn new(world: World, config: SimConfig) -> Result<Self, SimError> {
+        Self::with_props(world, config, None)
+    }
+
+    /// As [`Self::new`], with rigid props: a rapier world whose colliders the cloth touches,
+    /// and [`crate::contacts::Attachment`] components on particles.
+    pub fn with_props(
+        world: World,
+        mut config: SimConfig,
+        props: Option<Props>,
+    ) -> Result<Self, SimError> {
+        config.check()?;
+        if props.is_some() {
+            config.backend = props_backend(config.backend);
+        }
+        let mut sim = Self {
+            world,
+            config,
+            packed: Packed::default(),
+            solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
+            dirty: true,
+            grabbed: Vec::new(),
+            cloths: Vec::new(),
+            next_cloth: 0,
+            contained: Vec::new(),
+            newly_quarantined: 0,
+            choice: None,
+            parallel: false,
+            steps: 0,
+            time: 0.0,
+            stats: StepStats::default(),
+            #[cfg(feature = "gpu")]
+            gpu: gpu_solver(&config)?,
+            props,
+            user_stage: None,
+            #[cfg(feature = "gpu")]
+            device_scratch: Vec::new(),
+            contact: ContactDef::default(),
+            frame: Frame::default(),
+        };
+        #[cfg(not(feature = "gpu"))]
+        refuse_gpu(&config)?;
+        sim.gather()?;
+        Ok(sim)
+    }
+
+    /// The scene's World, settings, bodies and cloth triangles. The scene is validated first
+    /// (within the default [`Limits`]), so one built in code gets the same located errors as a
+    /// file.
+    pub fn from_scene(scene: &Scene) -> Result<Self, SimError> {
+        Self::from_scene_with(scene, &Limits::DEFAULT)
+    }
+
+    /// As [`Self::from_scene`], within `limits`.
+    pub fn from_scene_with(scene: &Scene, limits: &Limits) -> Result<Self, SimError> {
+        let issues = scene.validate_with(limits);
+        if !issues.is_empty() {
+            return Err(SimError::InvalidScene(issues));
+        }
+        let built = scene.build();
+        let mut sim = Self::with_props(built.world, built.config, built.props)?;
+        for e in built.cloths {
+            sim.cloths.push((ClothId(sim.next_cloth), e));
+            sim.next_cloth += 1;
+        }
+        Ok(sim)
+    }
+
+    /// Loads, validates and builds a scene file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, Error> {
+        Ok(Self::from_scene(&Scene::load(path)?)?)
+    }
+
+    /// The ECS World: particles, springs, pins and bodies as components.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// Mutable access; the next step re-gathers the World (state and topology), and the
+    /// cloths' triangles are made again from their [`ClothSprings`] when next asked for.
+    pub fn world_mut(&mut self) -> &mut World {
+        self.dirty = true;
+        self.frame.triangles.take();
+        &mut self.world
+    }
+
+    /// How the simulation steps.
+    pub fn config(&self) -> &SimConfig {
+        &self.config
+    }
+
+    /// Changes the step settings; coefficients are recomputed on the next step.
+    pub fn set_config(&mut self, mut config: SimConfig) -> Result<(), SimError> {
+        config.check()?;
+        if self.props.is_some() {
+            config.backend = props_backend(config.backend);
+        }
+        let keep_solver = config.integrator == self.config.integrator
+            && config.exact_displacement == self.config.exact_displacement
+            && config.gravity == self.config.gravity;
+        #[cfg(feature = "gpu")]
+        if !(keep_solver && config.backend == self.config.backend) {
+            self.gpu = gpu_solver(&config)?;
+            self.dirty = true;
+        }
+        #[cfg(not(feature = "gpu"))]
+        refuse_gpu(&config)?;
+        self.config = config;
+        if !keep_solver {
+            self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
+        }
+        if self.gather_options() != self.packed.options {
+            // The new integrator or back end takes the cloths in another form.
+            self.dirty = true;
+            return self.gather();
+        }
+        self.choose_substeps();
+        self.solver.prepare(&self.packed, self.config.h())?;
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            gpu.set_step(&self.packed, self.solver.coefficients(), self.config.h())?;
+        }
+        #[cfg(feature = "gpu")]
+        self.device_contacts()?;
+        Ok(())
+    }
+
+    /// The rigid props (rapier world, contact statistics), when the scene has bodies.
+    pub fn props(&self) -> Option<&Props> {
+        self.props.as_ref()
+    }
+
+    /// Mutable props: move kinematic bodies, push dynamic ones, add colliders.
+    pub fn props_mut(&mut self) -> Option<&mut Props> {
+        self.props.as_mut()
+    }
+
+    /// The back end the integrate stage runs on: `Cpu` or `Gpu` (never `Auto`).
+    pub fn backend(&self) -> Backend {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            return Backend::Gpu;
+        }
+        Backend::Cpu
+    }
+
+    /// The GPU adapter in use, e.g. "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan, Cpu)".
+    pub fn gpu_adapter(&self) -> Option<String> {
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &self.gpu {
+            return Some(gpu.context().describe());
+        }
+        None
+    }
+
+    /// The GPU solver, when the step runs on the GPU. Not API: for the lab and the tests.
+    #[doc(hidden)]
+    #[cfg(feature = "gpu")]
+    pub fn gpu_solver(&mut self) -> Option<&mut crate::gpu::GpuSolver> {
+        self.gpu.as_mut()
+    }
+
+    fn choose_substeps(&mut self) {
+        self.choice = self.config.auto_substeps.then(|| {
+            let choice = step_control::choose(&self.packed, self.config.integrator, self.config.dt);
+            self.config.substeps = choice.substeps;
+            choice
+        });
+    }
+
+    /// What automatic step control chose (None with fixed substeps).
+    pub fn step_choice(&self) -> Option<&StepChoice> {
+        self.choice.as_ref()
+    }
+
+    /// Positions in scene order (see [`crate::SceneIndex`]), as of the last step.
+    pub fn positions(&self) -> &[DVec3] {
+        &self.packed.x
+    }
+
+    /// Particle velocities (m/s), in scene order, as of the last step.
+    pub fn velocities(&self) -> &[DVec3] {
+        &self.packed.v
+    }
+
+    /// The packed buffers (read-only). Not API: for the lab and the tests.
+    #[doc(hidden)]
+    pub fn packed(&self) -> &Packed {
+        &self.packed
+    }
+
+    /// What each stage of the last frame cost.
+    pub fn stats(&self) -> &StepStats {
+        &self.stats
+    }
+
+    /// Frames stepped so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Simulated time (s).
+    pub fn time(&self) -> f64 {
+        self.time
+    }
+
+    /// Live figures of the current state: energy, strain, step ratio, non-finite count.
+    pub fn diagnostics(&self) -> Diagnostics {
+        Diagnostics {
+            energy: metrics::energy(&self.packed, self.config.gravity),
+            max_strain: metrics::max_strain(&self.packed),
+            step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
+                .map_or(0.0, |r| r.0),
+            non_finite: metrics::non_finite_count(&self.packed),
+            quarantined: self.world.query::<&Quarantined>().iter().count(),
+        }
+    }
+}

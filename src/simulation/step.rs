@@ -1,0 +1,245 @@
+//! Stepping: the stage order of a frame, gather and the frame's end.
+
+use super::*;
+
+impl Simulation {
+    /// Advances one frame of `dt`. Stages, in order:
+    /// 1. gather: World → buffers, only if the World may have changed (see [`Self::world_mut`]);
+    /// 2. integrate: `substeps` substeps on the buffers (no allocation), each followed by the
+    ///    contact stage when the scene has bodies;
+    /// 3. scatter: buffers → World.
+    ///
+    /// A scene without colliders has no contact stage. The state the World gets is always
+    /// finite: a particle gone non-finite is quarantined ([`Self::quarantined`]).
+    pub fn step(&mut self) -> Result<&StepStats, SimError> {
+        self.step_coupled(None)
+    }
+
+    /// As [`Self::step`], with the caller's own rapier sets as the rigid side, the way rapier's
+    /// own step takes them: particles collide with `colliders` and push the dynamic bodies of
+    /// `bodies`; particles with an [`crate::contacts::Attachment`] follow their body.
+    ///
+    /// The engine does not step these sets: the caller's loop steps rapier once per frame,
+    /// before or after this call. Within the frame a moving body is taken at its current
+    /// velocity (its pose `k·h` ahead at substep `k`), which is what rapier's step will do.
+    /// A simulation whose scene has bodies of its own refuses this (use [`Self::step`]).
+    pub fn step_with(
+        &mut self,
+        bodies: &mut RigidBodySet,
+        colliders: &ColliderSet,
+    ) -> Result<&StepStats, SimError> {
+        if self.props.is_some() {
+            return Err(SimError::OwnBodies);
+        }
+        if self.dirty {
+            self.gather()?;
+        }
+        let stage = self.user_stage.get_or_insert_with(|| {
+            let mut s = ContactStage::new(self.contact);
+            s.gather(&self.world, &self.packed);
+            s
+        });
+        if let Some(particle) = stage.dangling(&self.world, bodies) {
+            return Err(SimError::DanglingAttachment { particle });
+        }
+        self.step_coupled(Some((bodies, colliders)))
+    }
+
+    /// The step order, the one place it is written (both [`Self::step`] and
+    /// [`Self::step_with`] run it):
+    /// 1. gather: World → packed buffers, only when the World changed;
+    /// 2. per substep: the integrate kernel (CPU, or the device's, all substeps in one submit
+    ///    when nothing on the CPU needs the state between them), then, with bodies, the contact
+    ///    stage (rapier steps the bodies, attachments follow them, particles are pushed out of
+    ///    colliders with friction, bodies get the opposite impulses), then the quarantine check;
+    /// 3. scatter (`finish_frame`): buffers → World, this frame's quarantined particles pinned.
+    pub(super) fn step_coupled(
+        &mut self,
+        user: Option<(&mut RigidBodySet, &ColliderSet)>,
+    ) -> Result<&StepStats, SimError> {
+        let t0 = Instant::now();
+        let gathered = self.dirty;
+        self.contained.clear();
+        if self.dirty {
+            self.gather()?;
+        }
+        let t1 = Instant::now();
+        let h = self.config.h();
+        let substeps = self.config.substeps;
+        let mut coupling = match (user, self.props.as_mut(), self.user_stage.as_mut()) {
+            (Some((bodies, colliders)), _, Some(stage)) => Some(Coupling::User {
+                stage,
+                bodies,
+                colliders,
+            }),
+            (None, Some(p), _) => Some(Coupling::Own(p)),
+            _ => None,
+        };
+        let mut contacts = Duration::ZERO;
+        if let Some(c) = coupling.as_mut() {
+            c.begin_frame(substeps);
+        }
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            match coupling.as_mut() {
+                // On the device the quarantine checks the state where it comes back: once per
+                // frame when the substeps go in one submit.
+                None => {
+                    // Every substep in one submit; the state comes back once, for the scatter.
+                    gpu.run(substeps)?;
+                    gpu.read_back(&mut self.packed)?;
+                    contain(&mut self.packed, &self.world, &mut self.contained);
+                }
+                Some(Coupling::Own(p)) if gpu.contacts().is_some() => {
+                    device_frame(gpu, p, &mut self.device_scratch, substeps, h, &mut contacts)?;
+                    gpu.read_back(&mut self.packed)?;
+                    contain(&mut self.packed, &self.world, &mut self.contained);
+                }
+                Some(c) => {
+                    // Contacts run on the CPU: the state goes back and forth every substep.
+                    for k in 1..=substeps {
+                        let t = Instant::now();
+                        c.begin_substep(&self.packed);
+                        contacts += t.elapsed();
+                        gpu.run(1)?;
+                        gpu.read_back(&mut self.packed)?;
+                        let t = Instant::now();
+                        c.substep(&mut self.packed, h, k);
+                        contacts += t.elapsed();
+                        if contain(&mut self.packed, &self.world, &mut self.contained) {
+                            c.moved();
+                        }
+                        gpu.write_state(&self.packed);
+                    }
+                }
+            }
+            return self.finish_frame(t0, t1, gathered, contacts);
+        }
+        let (solver, packed) = (&mut self.solver, &mut self.packed);
+        let (world, found) = (&self.world, &mut self.contained);
+        let contacts_time = &mut contacts;
+        let mut integrate = move || {
+            (1..=substeps).try_for_each(|k| {
+                match coupling.as_mut() {
+                    None => solver.substep(packed, h)?,
+                    Some(c) => {
+                        let t = Instant::now();
+                        c.begin_substep(packed);
+                        *contacts_time += t.elapsed();
+                        solver.substep(packed, h)?;
+                        let t = Instant::now();
+                        c.substep(packed, h, k);
+                        *contacts_time += t.elapsed();
+                    }
+                }
+                if contain(packed, world, found) {
+                    if let Some(c) = coupling.as_mut() {
+                        c.moved();
+                    }
+                }
+                Ok::<(), SimError>(())
+            })
+        };
+        if self.parallel {
+            // One rayon job per frame: the passes inside run from a worker's own deque, so
+            // the only allocation is the injector's queue block, recycled every 63 frames.
+            rayon::scope(|_| integrate())?;
+        } else {
+            integrate()?;
+        }
+        self.finish_frame(t0, t1, gathered, contacts)
+    }
+
+    /// The end of a frame: the quarantine (the state is finite: every substep ended with
+    /// [`contain`]), then the scatter.
+    pub(super) fn finish_frame(
+        &mut self,
+        t0: Instant,
+        t1: Instant,
+        gathered: bool,
+        contacts: Duration,
+    ) -> Result<&StepStats, SimError> {
+        let t2 = Instant::now();
+        self.quarantine();
+        self.steps += 1;
+        self.time += self.config.dt;
+        let quarantined = std::mem::take(&mut self.newly_quarantined);
+        self.packed.scatter(&mut self.world);
+        let t3 = Instant::now();
+        self.stats = StepStats {
+            gather: t1 - t0,
+            integrate: (t2 - t1).saturating_sub(contacts),
+            contacts,
+            scatter: t3 - t2,
+            gathered,
+            substeps: self.config.substeps,
+            quarantined,
+        };
+        Ok(&self.stats)
+    }
+
+    /// What the step needs packed: cloth grids kept whole for an integrator with a grid pass
+    /// (on either back end), the colouring only for the sweeping integrators and the GPU.
+    pub(super) fn gather_options(&self) -> GatherOptions {
+        #[cfg(feature = "gpu")]
+        let gpu = self.gpu.is_some();
+        #[cfg(not(feature = "gpu"))]
+        let gpu = false;
+        let i = self.config.integrator;
+        let keep_grids = if gpu {
+            i.runs_on_gpu_grids()
+        } else {
+            i.runs_on_grids(self.config.exact_displacement)
+        };
+        GatherOptions {
+            keep_grids,
+            colouring: gpu || self.config.integrator.needs_colouring(),
+        }
+    }
+
+    pub(super) fn gather(&mut self) -> Result<(), SimError> {
+        let options = self.gather_options();
+        // In place: the old buffers go before the new ones are made (never two copies), and
+        // only once the World is known to be sound (an error leaves them as they were).
+        self.packed.regather(&self.world, options)?;
+        // Frozen before anything reads them: particles with a velocity set non-finite from
+        // outside, and the free ends of springs beyond f32's range (the device's precision,
+        // where they turn non-finite at once; the CPU does the same so the back ends agree).
+        let over = |v: f64| v > f32::MAX as f64;
+        let p = &self.packed;
+        self.contained.extend(
+            p.all_springs()
+                .filter(|s| over(s.stiffness) || over(s.damping))
+                .flat_map(|s| [s.a as usize, s.b as usize])
+                .filter(|&i| p.inv_mass[i] != 0.0),
+        );
+        contain(&mut self.packed, &self.world, &mut self.contained);
+        if !self.contained.is_empty() {
+            self.quarantine();
+            self.packed.regather(&self.world, options)?;
+        }
+        self.solver.invalidate();
+        self.parallel = crate::integrate::runs_parallel(&self.packed);
+        self.choose_substeps();
+        self.solver.prepare(&self.packed, self.config.h())?;
+        if let Some(p) = &mut self.props {
+            if let Some(particle) = p.dangling(&self.world) {
+                return Err(SimError::DanglingAttachment { particle });
+            }
+            p.gather(&self.world, &self.packed);
+        }
+        if let Some(s) = &mut self.user_stage {
+            s.gather(&self.world, &self.packed);
+        }
+        #[cfg(feature = "gpu")]
+        if let Some(gpu) = &mut self.gpu {
+            let c = &self.config;
+            let lin = self.solver.coefficients();
+            gpu.upload(&self.packed, lin, c.gravity, c.h(), c.integrator)?;
+        }
+        #[cfg(feature = "gpu")]
+        self.device_contacts()?;
+        self.dirty = false;
+        Ok(())
+    }
+}
