@@ -336,7 +336,7 @@ fn session(copy: &Path, text: &str, frames: u32, out: &Path) -> Result<(), Strin
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
     }
-    image.write_png(out)?;
+    image.write_png(out).map_err(|e| e.to_string())?;
     println!("wrote {}", out.display());
     Ok(())
 }

@@ -62,8 +62,9 @@ pub use components::{
     ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
 };
 pub use config::{Backend, Integrator, SimConfig};
-pub use contacts::{Attachment, ContactStats, Props, RigidProp};
+pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
+pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
 pub use schedule::StepStats;
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
@@ -77,8 +78,8 @@ pub use rapier3d;
 /// The names most programs need: `use harmonic::prelude::*;`.
 pub mod prelude {
     pub use crate::{
-        Advance, Backend, Diagnostics, Integrator, Particle, Pin, Scene, SimConfig, Simulation,
-        Spring, StepStats,
+        Advance, Backend, Body, BodyKind, Diagnostics, Integrator, Particle, Pin, Scene, Shape,
+        SimConfig, Simulation, Spring, StepStats,
     };
     pub use glam::DVec3;
 }

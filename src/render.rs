@@ -819,18 +819,29 @@ impl Image {
     }
 
     /// Writes the image to `path` as an 8-bit RGBA PNG; an error names the path.
-    pub fn write_png(&self, path: &Path) -> Result<(), String> {
-        let file = std::fs::File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
+        let at = |e: png::EncodingError| ImageError {
+            path: path.to_path_buf(),
+            source: e,
+        };
+        let file = std::fs::File::create(path).map_err(|e| at(e.into()))?;
         let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), self.width, self.height);
         encoder.set_color(png::ColorType::Rgba);
         encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder
-            .write_header()
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        writer
-            .write_image_data(&self.rgba)
-            .map_err(|e| format!("{}: {e}", path.display()))
+        let mut writer = encoder.write_header().map_err(at)?;
+        writer.write_image_data(&self.rgba).map_err(at)
     }
+}
+
+/// An image could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {source}", path.display())]
+pub struct ImageError {
+    /// The file that could not be written.
+    pub path: std::path::PathBuf,
+    /// Why: the file could not be created, or the PNG encoder failed.
+    #[source]
+    pub source: png::EncodingError,
 }
 
 /// A renderer with its own target texture, read back to the CPU after each draw.

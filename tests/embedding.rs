@@ -215,16 +215,14 @@ fn a_bad_cloth_or_body_added_at_run_time_is_a_located_error() {
         "b",
     );
     assert!(body.is_err(), "a negative radius must not parse");
-    let mut ok = Scene::parse(
-        "Scene(dt: 0.01, bodies: [(kind: Fixed, shape: Ball(radius: 0.2))])",
-        "b",
-    )
-    .unwrap()
-    .bodies
-    .remove(0);
-    ok.mass = Some(-2.0);
-    let e = sim.add_body(&ok).unwrap_err().to_string();
-    assert!(e.contains("bodies[0].mass"), "{e}");
+    let bad = Body::new(BodyKind::Fixed, Shape::Ball { radius: 0.2 }).with_mass(-2.0);
+    let e = sim.add_body(&bad).unwrap_err().to_string();
+    assert!(e.contains("add_body: mass"), "{e}");
+    let e = sim
+        .add_body(&Body::new(BodyKind::Fixed, Shape::Ball { radius: 0.2 }).at(DVec3::NAN))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("add_body: position"), "{e}");
     // Nothing was added.
     assert_eq!(sim.positions().len(), 144);
     assert!(sim.props().is_none());
@@ -240,13 +238,8 @@ fn a_body_added_at_run_time_catches_the_cloth_and_its_removal_frees_it() {
          shear: Some((frequency: 30.0, damping_ratio: 0.1)))])"#;
     let mut sim = Simulation::from_scene(&Scene::parse(text, "fall").unwrap()).unwrap();
     assert!(sim.props().is_none(), "no bodies, no rapier world");
-    let ball = Scene::parse(
-        "Scene(dt: 0.01, bodies: [(kind: Fixed, shape: Ball(radius: 0.3), position: (0.0, 0.3, 0.0))])",
-        "b",
-    )
-    .unwrap()
-    .bodies
-    .remove(0);
+    let ball =
+        Body::new(BodyKind::Fixed, Shape::Ball { radius: 0.3 }).at(DVec3::new(0.0, 0.3, 0.0));
     let prop = sim.add_body(&ball).unwrap();
     let thickness = sim.props().unwrap().contact().thickness;
     for _ in 0..150 {

@@ -217,7 +217,7 @@ fn render(args: RenderArgs) -> Result<(), String> {
             .capture(&mut sim, &camera, &style)
             .map_err(|e| e.to_string())?;
         let path = args.out.join(format!("{stem}_{k:03}.png"));
-        image.write_png(&path)?;
+        image.write_png(&path).map_err(|e| e.to_string())?;
         let line = format!(
             "wrote {} (t = {:.3} s, {} cloth pixel(s))",
             path.display(),
@@ -239,7 +239,7 @@ fn render(args: RenderArgs) -> Result<(), String> {
         let columns = (pictures.len() as f64).sqrt().ceil() as u32;
         if let Some(sheet) = Image::sheet(&pictures, columns) {
             let path = args.out.join(format!("{stem}_sheet.png"));
-            sheet.write_png(&path)?;
+            sheet.write_png(&path).map_err(|e| e.to_string())?;
             println!("wrote {}", path.display());
         }
     }
@@ -391,7 +391,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             p.contact().thickness,
             p.contact().friction,
             p.contact().kinetic_friction,
-            if p.moving { "every substep" } else { "never (all bodies fixed)" }
+            if p.moving() { "every substep" } else { "never (all bodies fixed)" }
         );
     }
     let mut max_strain = start.max_strain;

@@ -23,7 +23,7 @@ pub fn path_pose(path: &[Keyframe], t: f64) -> Pose {
 }
 
 /// The rapier collider of a shape, or why the shape is unusable.
-pub fn collider_of(shape: &Shape) -> Result<ColliderBuilder, String> {
+pub(crate) fn collider_of(shape: &Shape) -> Result<ColliderBuilder, String> {
     Ok(match shape {
         Shape::Ball { radius } => ColliderBuilder::ball(*radius as f32),
         Shape::Cuboid { half_extents: h } => {
@@ -66,9 +66,9 @@ pub fn collider_of(shape: &Shape) -> Result<ColliderBuilder, String> {
 impl Props {
     /// The rapier world of `bodies`, each also spawned into `world` as a [`RigidProp`] entity.
     /// Shapes must have passed scene validation.
-    pub fn build(
+    pub(crate) fn build(
         bodies: &[BodyDef],
-        contact: ContactDef,
+        contact: ContactMaterial,
         gravity: DVec3,
         world: &mut World,
     ) -> Result<(Props, Vec<RigidBodyHandle>), String> {
@@ -97,7 +97,7 @@ impl Props {
 
     /// Adds a body (validated like a scene's) to the rapier world and spawns its
     /// [`RigidProp`] entity into `world`.
-    pub fn add_body(&mut self, b: &BodyDef, world: &mut World) -> Result<RigidProp, String> {
+    pub(crate) fn add_body(&mut self, b: &BodyDef, world: &mut World) -> Result<RigidProp, String> {
         let physics = &mut self.physics;
         let (position, rotation) = match b.path.first() {
             Some(k) => (k.position, k.rotation),
@@ -140,7 +140,7 @@ impl Props {
 
     /// Removes a body, its collider, its [`RigidProp`] entity and the attachments of particles
     /// to it (those particles go free). False when the body is not in this world.
-    pub fn remove_body(&mut self, body: RigidBodyHandle, world: &mut World) -> bool {
+    pub(crate) fn remove_body(&mut self, body: RigidBodyHandle, world: &mut World) -> bool {
         if self.physics.remove_body(body).is_none() {
             return false;
         }
@@ -169,12 +169,12 @@ impl Props {
     }
 
     /// After a gather: the attached particles' packed indices.
-    pub fn gather(&mut self, world: &World, packed: &Packed) {
+    pub(crate) fn gather(&mut self, world: &World, packed: &Packed) {
         self.stage.gather(world, packed);
     }
 
     /// Entities of attached particles whose body no longer exists.
-    pub fn dangling(&self, world: &World) -> Option<Entity> {
+    pub(crate) fn dangling(&self, world: &World) -> Option<Entity> {
         self.stage.dangling(world, &self.physics.bodies)
     }
 
@@ -185,7 +185,7 @@ impl Props {
 
     /// The frame's statistics start again; position-driven bodies given a target through the
     /// API (`set_next_kinematic_position`) reach it at the frame's end, in even substeps.
-    pub fn begin_frame(&mut self, substeps: u32) {
+    pub(crate) fn begin_frame(&mut self, substeps: u32) {
         self.stage.begin_frame();
         (self.substep, self.substeps) = (0, substeps.max(1));
         self.driven.clear();
@@ -199,14 +199,14 @@ impl Props {
     }
 
     /// Steps 1–3 of the module docs, after the integrate stage of one substep.
-    pub fn substep(&mut self, packed: &mut Packed, h: f64) {
+    pub(crate) fn substep(&mut self, packed: &mut Packed, h: f64) {
         self.step_bodies(h);
         let (bodies, colliders) = (&mut self.physics.bodies, &self.physics.colliders);
         self.stage.substep(packed, bodies, colliders, 0.0, h);
     }
 
     /// Step 1: the bodies move by one substep (paths, API targets, then rapier).
-    pub fn step_bodies(&mut self, h: f64) {
+    pub(crate) fn step_bodies(&mut self, h: f64) {
         self.substep += 1;
         self.time += h;
         if self.moving {
@@ -227,13 +227,18 @@ impl Props {
         }
     }
 
+    /// Some body can move (rapier steps every substep); false when all are fixed.
+    pub fn moving(&self) -> bool {
+        self.moving
+    }
+
     /// What the contact stage did in the last frame.
     pub fn stats(&self) -> &ContactStats {
         &self.stage.stats
     }
 
     /// The cloth's contact material: thickness and friction.
-    pub fn contact(&self) -> &ContactDef {
+    pub fn contact(&self) -> &ContactMaterial {
         &self.stage.contact
     }
 

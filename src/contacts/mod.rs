@@ -27,9 +27,10 @@ use rapier3d::prelude::{
 use rayon::prelude::*;
 
 use crate::buffers::Packed;
-use crate::scene::props::{BodyDef, BodyKind, ContactDef, Keyframe, Shape};
+use crate::scene::props::{BodyDef, BodyKind, ContactMaterial, Keyframe, Shape};
 
 mod bodies;
+mod body;
 #[cfg(feature = "gpu")]
 mod device;
 mod queries;
@@ -38,6 +39,7 @@ mod stage;
 mod tests;
 
 pub use bodies::*;
+pub use body::*;
 use queries::*;
 pub use stage::*;
 
@@ -77,11 +79,11 @@ pub struct ContactStats {
 /// stage.
 pub struct Props {
     /// rapier's world: the bodies, colliders and joints, stepped by the contact stage.
-    pub physics: PhysicsWorld,
+    pub(crate) physics: PhysicsWorld,
     /// Some body can move: rapier steps each substep.
-    pub moving: bool,
+    pub(crate) moving: bool,
     /// Some body is dynamic: impulses go back to bodies.
-    pub dynamic: bool,
+    pub(crate) dynamic: bool,
     /// Position-driven bodies following keyframed paths from the scene.
     paths: Vec<(RigidBodyHandle, Vec<Keyframe>)>,
     /// Position-driven bodies moved through the API this frame: (body, start, target).

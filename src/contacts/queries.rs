@@ -11,7 +11,7 @@ pub(super) fn support(
     hit: &Hit,
     x: DVec3,
     v: DVec3,
-    c: &ContactDef,
+    c: &ContactMaterial,
     cand: &Candidate,
     h: f64,
     sum: &mut Exchange,
@@ -53,7 +53,7 @@ pub(super) fn posed(body: &RigidBody, ahead: f64) -> Pose {
 pub(super) fn respond(
     rel: DVec3,
     normal: DVec3,
-    c: &ContactDef,
+    c: &ContactMaterial,
     cand: &Candidate,
 ) -> Option<DVec3> {
     let vn = rel.dot(normal);

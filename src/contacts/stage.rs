@@ -5,7 +5,7 @@ use super::*;
 /// The contact stage's buffers and statistics: attachments, then particles against colliders.
 /// It owns no rapier state, so it runs against the engine's sets or a caller's.
 pub struct ContactStage {
-    pub contact: ContactDef,
+    pub contact: ContactMaterial,
     /// Attached particles as packed indices, refreshed at gather.
     pub(super) attached: Vec<(usize, Attachment)>,
     /// Per packed particle: attached (placed by its body, so no contacts).
@@ -63,7 +63,7 @@ impl Candidate {
 }
 
 impl ContactStage {
-    pub fn new(contact: ContactDef) -> Self {
+    pub fn new(contact: ContactMaterial) -> Self {
         Self {
             contact,
             attached: Vec::new(),

@@ -110,7 +110,7 @@ pub struct Scene {
     pub bodies: Vec<props::BodyDef>,
     /// The cloth's contact material (thickness, friction, restitution).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub contact: Option<props::ContactDef>,
+    pub contact: Option<props::ContactMaterial>,
     /// Particles held at points of bodies.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub attachments: Vec<props::AttachmentDef>,

@@ -125,14 +125,14 @@ pub struct BodyDef {
     pub path: Vec<Keyframe>,
 }
 
-fn default_body_friction() -> f64 {
+pub(crate) fn default_body_friction() -> f64 {
     0.5
 }
 
 /// The cloth's contact material.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct ContactDef {
+pub struct ContactMaterial {
     /// Particles are kept this far outside every collider (m).
     #[serde(default = "default_thickness")]
     pub thickness: f64,
@@ -147,7 +147,7 @@ pub struct ContactDef {
     pub restitution: f64,
 }
 
-impl Default for ContactDef {
+impl Default for ContactMaterial {
     fn default() -> Self {
         Self {
             thickness: default_thickness(),

@@ -147,7 +147,7 @@ impl Simulation {
 
     /// The cloth's contact material against the caller's sets ([`Self::step_with`]); a scene's
     /// own bodies use the scene's `contact`.
-    pub fn set_contact_material(&mut self, contact: ContactDef) {
+    pub fn set_contact_material(&mut self, contact: ContactMaterial) {
         self.contact = contact;
         if let Some(s) = &mut self.user_stage {
             s.contact = contact;

@@ -154,16 +154,27 @@ impl Simulation {
         Ok(())
     }
 
-    /// Adds a rigid body, validated as a scene's would be. The first body of a simulation
-    /// without any brings the rapier world and the contact stage (default contact material,
-    /// see [`Self::set_contact_material`]).
-    pub fn add_body(
-        &mut self,
-        body: &crate::scene::props::BodyDef,
-    ) -> Result<crate::contacts::RigidProp, Error> {
+    /// Adds a rigid body, validated as a scene's would be (an error names the field, e.g.
+    /// `add_body: mass`). The first body of a simulation without any brings the rapier world and
+    /// the contact stage (default contact material, see [`Self::set_contact_material`]).
+    pub fn add_body(&mut self, body: &crate::Body) -> Result<crate::RigidProp, Error> {
+        let def = body.to_def();
         let mut check = Scene::new(self.config.dt);
-        check.bodies.push(body.clone());
-        valid_part(&check, "add_body")?;
+        check.bodies.push(def.clone());
+        match valid_part(&check, "add_body") {
+            Ok(()) => {}
+            Err(Error::Scene(crate::SceneError::Invalid { path, mut issues })) => {
+                for i in &mut issues {
+                    if let Some(field) = i.location.strip_prefix("bodies[0].") {
+                        i.location = field.to_string();
+                    } else if i.location == "bodies[0]" {
+                        i.location = "body".into();
+                    }
+                }
+                return Err(crate::SceneError::Invalid { path, issues }.into());
+            }
+            Err(e) => return Err(e),
+        }
         if self.props.is_none() {
             let (props, _) = Props::build(&[], self.contact, self.config.gravity, &mut self.world)
                 .map_err(|e| SimError::BadBody(e.to_string()))?;
@@ -171,7 +182,7 @@ impl Simulation {
         }
         let props = self.props.as_mut().ok_or(SimError::UnknownBody)?;
         let prop = props
-            .add_body(body, &mut self.world)
+            .add_body(&def, &mut self.world)
             .map_err(SimError::BadBody)?;
         self.dirty = true;
         Ok(prop)

@@ -18,7 +18,7 @@ use crate::contacts::{ContactStage, ContactStats, Props};
 use crate::error::{Error, SimError};
 use crate::integrate::Solver;
 use crate::metrics;
-use crate::scene::props::ContactDef;
+use crate::scene::props::ContactMaterial;
 use crate::scene::{Limits, Scene};
 use crate::schedule::StepStats;
 use crate::step_control::{self, StepChoice};
@@ -77,7 +77,7 @@ pub struct Simulation {
     #[cfg(feature = "gpu")]
     device_scratch: Vec<crate::gpu::contacts::Collider>,
     /// The cloth's contact material for [`Simulation::step_with`].
-    contact: ContactDef,
+    contact: ContactMaterial,
     /// The game-loop side: fixed-step accumulator and render buffers.
     frame: Frame,
     /// Particles held by [`Simulation::grab`] that were free before.
@@ -185,7 +185,7 @@ impl Simulation {
             user_stage: None,
             #[cfg(feature = "gpu")]
             device_scratch: Vec::new(),
-            contact: ContactDef::default(),
+            contact: ContactMaterial::default(),
             frame: Frame::default(),
         };
         #[cfg(not(feature = "gpu"))]
