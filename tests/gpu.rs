@@ -1,5 +1,6 @@
-//! The GPU back end: shaders valid, Rust mirrors laid out like the WGSL structs, GPU and CPU
-//! kernels agreeing on random scenes, and every shipped scene finite on the GPU.
+//! The GPU back end on an adapter: GPU and CPU kernels agreeing on random scenes and cloth
+//! grids, device contacts matching the CPU stage, and every shipped scene finite on the GPU
+//! (the shaders and layouts without an adapter: `gpu_shaders.rs`).
 //!
 //! GPU tests skip only when no adapter at all exists, and fail instead when
 //! `HARMONIC_REQUIRE_GPU` is set (CI sets it: it has Mesa's lavapipe).
@@ -7,182 +8,14 @@
 
 mod common;
 
-use std::mem::{offset_of, size_of};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use harmonic::internals::gpu::{self, GpuContext, Kernel};
+use harmonic::internals::gpu::{GpuContext, Kernel};
 use harmonic::prelude::*;
 use harmonic::{Backend, GpuError, SimError};
 use hecs::World;
 
-fn shader_files() -> Vec<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
-    let mut files: Vec<_> = std::fs::read_dir(&dir)
-        .expect("shaders/ exists")
-        .map(|e| e.expect("readable entry").path())
-        .filter(|p| p.extension().is_some_and(|e| e == "wgsl"))
-        .collect();
-    files.sort();
-    assert!(!files.is_empty(), "no WGSL files in {}", dir.display());
-    files
-}
-
-fn parse(path: &Path) -> naga::Module {
-    let text = std::fs::read_to_string(path).expect("readable shader");
-    naga::front::wgsl::parse_str(&text).unwrap_or_else(|e| {
-        panic!(
-            "{}",
-            e.emit_to_string_with_path(&text, &path.display().to_string())
-        )
-    })
-}
-
-#[test]
-fn every_shader_parses_and_validates() {
-    for path in shader_files() {
-        let module = parse(&path);
-        naga::valid::Validator::new(
-            naga::valid::ValidationFlags::all(),
-            naga::valid::Capabilities::default(),
-        )
-        .validate(&module)
-        .unwrap_or_else(|e| panic!("{}: {e:?}", path.display()));
-    }
-}
-
-#[test]
-fn the_embedded_shader_is_the_file() {
-    let file = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/integrate.wgsl"),
-    )
-    .expect("readable");
-    assert_eq!(gpu::SHADER, file);
-    let file = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"),
-    )
-    .expect("readable");
-    assert_eq!(gpu::contacts::SHADER, file);
-}
-
-/// Size and member offsets of the WGSL struct `name`, from naga's layout.
-fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
-    let mut layouter = naga::proc::Layouter::default();
-    layouter.update(module.to_ctx()).expect("layout");
-    for (handle, ty) in module.types.iter() {
-        if ty.name.as_deref() == Some(name) {
-            if let naga::TypeInner::Struct { members, span } = &ty.inner {
-                assert_eq!(layouter[handle].size, *span);
-                let members = members
-                    .iter()
-                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
-                    .collect();
-                return (*span, members);
-            }
-        }
-    }
-    panic!("struct {name} not in the shader");
-}
-
-macro_rules! check_layout {
-    ($module:expr, $([$m:ident])? $ty:ident { $($field:ident),* $(,)? }) => {{
-        let (size, members) = wgsl_layout($module, stringify!($ty));
-        type Mirror = gpu::$($m::)?$ty;
-        let rust: Vec<(String, u32)> = vec![
-            $((stringify!($field).to_string(), offset_of!(Mirror, $field) as u32)),*
-        ];
-        assert_eq!(members, rust, "{}: member names and offsets", stringify!($ty));
-        assert_eq!(size as usize, size_of::<Mirror>(), "{}: size", stringify!($ty));
-    }};
-}
-
-#[test]
-fn pod_mirrors_match_the_wgsl_layouts() {
-    let module = parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/integrate.wgsl"));
-    check_layout!(
-        &module,
-        Params {
-            gravity,
-            h,
-            particles,
-            springs,
-            one,
-            _pad1
-        }
-    );
-    check_layout!(&module, Position { hi, lo });
-    check_layout!(&module, Coef { rest, p, q, wa });
-    check_layout!(&module, Entry { spring, coef });
-    check_layout!(
-        &module,
-        Range {
-            start,
-            count,
-            cols,
-            links,
-            link_count,
-            _pad0,
-            _pad1,
-            _pad2
-        }
-    );
-    let contact_module =
-        parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"));
-    {
-        check_layout!(
-            &contact_module,
-            [contacts] Step {
-                h,
-                thickness,
-                restitution,
-                particles,
-                colliders,
-                slot,
-                groups,
-                _pad
-            }
-        );
-        check_layout!(
-            &contact_module,
-            [contacts] Collider {
-                kind,
-                dynamic,
-                _pad0,
-                _pad1,
-                translation,
-                rotation,
-                dims,
-                lin,
-                ang,
-                com,
-                sphere
-            }
-        );
-        check_layout!(
-            &contact_module,
-            [contacts] Partial {
-                impulse,
-                torque,
-                support,
-                support_torque
-            }
-        );
-    }
-    // The override constants the solver sets exist in the shader.
-    let overrides: Vec<_> = module
-        .overrides
-        .iter()
-        .filter_map(|(_, o)| o.name.clone())
-        .collect();
-    for name in ["WORKGROUP", "RATE", "PINS", "UPDATE", "GRIDS"] {
-        assert!(
-            overrides.iter().any(|o| o == name),
-            "override {name} missing: {overrides:?}"
-        );
-    }
-}
-
-/// The software-or-hardware context, or `None` (test skipped) when no adapter exists at all.
 fn context() -> Option<Arc<GpuContext>> {
     common::gpu_or_skip(GpuContext::shared(true))
 }
