@@ -23,7 +23,7 @@ use crate::integrate::Integrator;
 /// neighbours outside held fixed: a principal submatrix, so the estimate stays a lower bound,
 /// and the scratch stays small however large the cloth.
 pub fn network_frequency(packed: &Packed, iterations: usize) -> f64 {
-    if packed.grids.is_empty() {
+    if packed.topology.grids.is_empty() {
         power_iteration(packed, iterations)
     } else {
         power_iteration(&windowed(packed), iterations)
@@ -48,7 +48,7 @@ fn windowed(packed: &Packed) -> Packed {
         })
     };
     let mut pending = Vec::new();
-    for g in &packed.grids {
+    for g in &packed.topology.grids {
         let (cols, rows) = (g.cols as usize, g.rows as usize);
         let at = |c: usize, r: usize| g.base as usize + r * cols + c;
         // The stiffest particle, the one nearest the centre among equals.

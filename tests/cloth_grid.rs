@@ -97,12 +97,12 @@ fn the_grid_pass_matches_the_springs_one_by_one() {
 fn grid_against_single(scene: &Scene, frames: usize, edit: impl Fn(World) -> World, what: &str) {
     let built = scene.build();
     let mut grid = Simulation::with_props(edit(built.world), built.config, None).unwrap();
-    assert_eq!(grid.packed().grids.len(), 1);
+    assert_eq!(grid.packed().topology.grids.len(), 1);
     assert!(grid.packed().springs.is_empty());
     let built = scene.build();
     let world = springs_one_by_one(edit(built.world));
     let mut single = Simulation::with_props(world, built.config, None).unwrap();
-    assert!(single.packed().grids.is_empty());
+    assert!(single.packed().topology.grids.is_empty());
     assert_eq!(grid.packed().spring_count(), single.packed().spring_count());
     let start = grid.positions().to_vec();
     let (a, b) = (
@@ -160,11 +160,11 @@ fn the_closed_form_on_a_grid_handles_any_masses() {
 #[test]
 fn exact_displacement_gets_the_grid_expanded() {
     let mut sim = Simulation::from_scene(&cloth((16, 16), Integrator::Harmonic)).unwrap();
-    assert_eq!(sim.packed().grids.len(), 1);
+    assert_eq!(sim.packed().topology.grids.len(), 1);
     let mut c = *sim.config();
     c.exact_displacement = true;
     sim.set_config(c).unwrap();
-    assert!(sim.packed().grids.is_empty());
+    assert!(sim.packed().topology.grids.is_empty());
     sim.step().unwrap();
     assert!(sim.positions().iter().all(|x| x.is_finite()));
 }
@@ -173,7 +173,7 @@ fn exact_displacement_gets_the_grid_expanded() {
 fn a_grid_that_no_longer_matches_its_particles_is_a_located_error() {
     let mut sim = Simulation::from_scene(&cloth((8, 8), Integrator::SymplecticEuler)).unwrap();
     sim.step().unwrap();
-    let grid = sim.packed().grids[0].entity;
+    let grid = sim.packed().topology.grids[0].entity;
     // A particle of the cloth despawned: its scene index is missing.
     let gone = sim.particle_entity(19).unwrap();
     let particle = *sim.world().get::<&Particle>(gone).unwrap();
@@ -283,13 +283,13 @@ fn other_integrators_get_the_grid_expanded() {
     let mut c = *sim.config();
     c.integrator = Integrator::HarmonicGs;
     sim.set_config(c).unwrap();
-    assert!(sim.packed().grids.is_empty());
+    assert!(sim.packed().topology.grids.is_empty());
     assert_eq!(sim.packed().springs.len(), springs);
     assert!(sim.packed().colouring.colours() > 0);
     sim.step().unwrap();
     c.integrator = Integrator::SymplecticEuler;
     sim.set_config(c).unwrap();
-    assert_eq!(sim.packed().grids.len(), 1);
+    assert_eq!(sim.packed().topology.grids.len(), 1);
     sim.step().unwrap();
     assert!(sim.positions().iter().all(|x| x.is_finite()));
 }
@@ -297,7 +297,7 @@ fn other_integrators_get_the_grid_expanded() {
 #[test]
 fn a_link_offset_that_cannot_be_reversed_is_refused() {
     let mut sim = Simulation::from_scene(&cloth((4, 4), Integrator::SymplecticEuler)).unwrap();
-    let grid = sim.packed().grids[0].entity;
+    let grid = sim.packed().topology.grids[0].entity;
     sim.world_mut()
         .get::<&mut ClothSprings>(grid)
         .unwrap()

@@ -67,7 +67,12 @@ fn cloths_side_by_side_match_each_cloth_alone() {
     // 9 cloths of 24×24: 5,184 particles, enough for the pass to split them over threads.
     let (n, k) = (24, 9);
     let all = harmonic::internals::hanging_cloths(n, k);
-    let grids = Simulation::from_scene(&all).unwrap().packed().grids.len();
+    let grids = Simulation::from_scene(&all)
+        .unwrap()
+        .packed()
+        .topology
+        .grids
+        .len();
     assert_eq!(grids, k as usize, "each cloth on the grid pass");
     let (one, two) = (on(1, &all), on(2, &all));
     assert!(one.iter().all(|x| x.is_finite()));

@@ -281,7 +281,7 @@ fn cloth_grids_on_the_gpu_match_the_cpu_grid_pass() {
             gpu.step().expect("step");
             if integrator.runs_on_gpu_grids() {
                 // The GPU really keeps the grids whole and specialises to them.
-                assert_eq!(gpu.packed().grids.len(), 2);
+                assert_eq!(gpu.packed().topology.grids.len(), 2);
                 assert_eq!(gpu.packed().springs.len(), 3, "only the rope one by one");
                 let solver = gpu.gpu_solver().expect("on the GPU");
                 assert!(solver.specialisation().expect("uploaded").grids);
@@ -471,7 +471,7 @@ fn specialisation_follows_the_scene() {
         scene.integrator = Some(integrator.into());
         scene.backend = Some("gpu".into());
         let mut sim = Simulation::from_scene(&scene).expect("GPU");
-        let grids = sim.packed().grids.len();
+        let grids = sim.packed().topology.grids.len();
         let spec = sim.gpu_solver().expect("on the GPU").specialisation();
         (grids, spec.expect("uploaded").grids)
     };

@@ -88,7 +88,7 @@ fn a_large_grid_seen_through_its_window_gives_the_whole_cloths_frequency() {
         },
     )
     .unwrap();
-    assert!(whole.grids.is_empty() && grid.grids.len() == 1);
+    assert!(whole.topology.grids.is_empty() && grid.topology.grids.len() == 1);
     let (w, g) = (
         step_control::network_frequency(&whole, 300),
         step_control::network_frequency(&grid, 300),

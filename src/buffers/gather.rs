@@ -59,11 +59,14 @@ impl Packed {
         let n = keys.len();
         let entities: Vec<Entity> = keys.iter().map(|k| k.2).collect();
         drop(keys);
+        let mut topology = Topology {
+            options,
+            ..Default::default()
+        };
         let mut packed = Packed {
             x: Vec::with_capacity(n),
             v: Vec::with_capacity(n),
             inv_mass: Vec::with_capacity(n),
-            options,
             ..Default::default()
         };
         for &e in &entities {
@@ -78,9 +81,9 @@ impl Packed {
                 .push(if pinned { 0.0 } else { 1.0 / p.mass });
         }
         drop(view);
-        packed.entities = entities;
+        topology.entities = entities;
         let lookup = |spring: Entity, end: Entity| -> Result<u32, SimError> {
-            packed
+            topology
                 .index_of(end)
                 .map(|i| i as u32)
                 .ok_or(SimError::DanglingSpring { spring, end })
@@ -100,25 +103,27 @@ impl Packed {
         }
         drop(springs);
         if options.keep_grids {
-            packed.grids = grids;
+            topology.grids = grids;
             let mut at = 0;
-            for g in &packed.grids {
+            for g in &topology.grids {
                 if g.range().start > at {
-                    packed.loose.push(at..g.range().start);
+                    topology.loose.push(at..g.range().start);
                 }
                 at = g.range().end;
             }
             if at < n {
-                packed.loose.push(at..n);
+                topology.loose.push(at..n);
             }
         } else {
             out.reserve(grids.iter().map(PackedGrid::spring_count).sum());
             for g in &grids {
                 out.extend(g.springs(&packed.inv_mass));
             }
-            packed.loose.push(0..n);
+            topology.loose.push(0..n);
         }
         packed.springs = out;
+        topology.index_springs(n, &packed.springs);
+        packed.topology = Arc::new(topology);
         if !packed.springs.is_empty() {
             packed.build_incidence();
         }
@@ -131,12 +136,15 @@ impl Packed {
 
     /// Rebuilds the incidence after `springs` was filled by hand.
     pub(crate) fn rebuild_incidence(&mut self) {
-        self.loose.clear();
-        self.loose.push(0..self.x.len());
+        let n = self.x.len();
+        let topology = Arc::make_mut(&mut self.topology);
+        topology.loose.clear();
+        topology.loose.push(0..n);
+        topology.index_springs(n, &self.springs);
         self.build_incidence();
     }
 
-    fn build_incidence(&mut self) {
+    pub(super) fn build_incidence(&mut self) {
         let n = self.x.len();
         let mut count = vec![0u32; n + 1];
         for s in &self.springs {

@@ -7,6 +7,7 @@
 #![allow(missing_docs)]
 
 use std::ops::Range;
+use std::sync::Arc;
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -16,6 +17,9 @@ use crate::components::{GridLink, Particle};
 use crate::error::SimError;
 
 mod gather;
+mod topology;
+
+pub use topology::Topology;
 
 /// A spring in packed form. `wa`/`wb` split the pair's relative velocity change by mass:
 /// `Δv_a = −wa φ n`, `Δv_b = +wb φ n`, with `wa = μ/m_a`, `wb = μ/m_b` (0 at a pinned end).
@@ -278,27 +282,25 @@ impl GatherOptions {
     };
 }
 
-/// The packed scene: particle state in scene order, springs, and per-particle incidence (CSR).
+/// The packed scene. Split the way Jolt splits a soft body's shared settings from its
+/// instance: [`Topology`] (the particle order, the cloth grids, which springs touch
+/// which particle) is built by a World gather and shared; the state (`x`, `v`) and the mass
+/// split (`inv_mass` with pins applied, the springs' `mu`/`wa`/`wb`, the incidence and
+/// colouring) are the instance. Moving a pinned particle writes the state only; pinning or
+/// freeing one refreshes the mass split ([`Self::repin`]); neither reads the World.
 #[derive(Clone, Debug, Default)]
 pub struct Packed {
-    pub entities: Vec<Entity>,
+    pub topology: Arc<Topology>,
     pub x: Vec<DVec3>,
     pub v: Vec<DVec3>,
     /// 0 for pinned particles.
     pub inv_mass: Vec<f64>,
     /// Springs one by one: the World's [`Spring`]s, then the cloths' unless kept as grids.
+    /// `a`, `b`, `rest`, `stiffness`, `damping` are topology; `mu`, `wa`, `wb` the mass split.
     pub springs: Vec<PackedSpring>,
-    /// Cloth springs kept implicit ([`GatherOptions::keep_grids`]), by packed range.
-    pub grids: Vec<PackedGrid>,
-    /// Packed ranges of the particles in no grid (with kept grids; otherwise everything).
-    pub loose: Vec<Range<usize>>,
-    /// Incidence of `springs` (empty without springs).
+    /// Incidence of `springs` (empty without springs); pinned ends have no entry.
     pub incidence: Incidence,
     pub colouring: Colouring,
-    /// What was built beyond the state.
-    pub options: GatherOptions,
-    /// Entity id → packed index (`u32::MAX` where none), built on first use.
-    index_by_id: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl Packed {
@@ -316,6 +318,7 @@ impl Packed {
     pub fn spring_count(&self) -> usize {
         self.springs.len()
             + self
+                .topology
                 .grids
                 .iter()
                 .map(PackedGrid::spring_count)
@@ -328,7 +331,7 @@ impl Packed {
         self.springs
             .iter()
             .copied()
-            .chain(self.grids.iter().flat_map(move |g| g.springs(inv)))
+            .chain(self.topology.grids.iter().flat_map(move |g| g.springs(inv)))
     }
 
     /// [`Self::all_springs`] in parallel (unordered).
@@ -337,7 +340,7 @@ impl Packed {
         self.springs
             .par_iter()
             .copied()
-            .chain(self.grids.par_iter().flat_map(move |g| {
+            .chain(self.topology.grids.par_iter().flat_map(move |g| {
                 (0..g.rows)
                     .into_par_iter()
                     .flat_map_iter(move |r| g.row_springs(r, inv))
@@ -359,7 +362,7 @@ impl Packed {
     /// Writes positions and velocities back into the World's particles.
     pub fn scatter(&self, world: &mut World) {
         // Entity by entity, in packed order: no index map, and (unlike a view) no allocation.
-        for (i, &e) in self.entities.iter().enumerate() {
+        for (i, &e) in self.topology.entities.iter().enumerate() {
             if let Ok(p) = world.query_one_mut::<&mut Particle>(e) {
                 p.position = self.x[i];
                 if self.inv_mass[i] != 0.0 {
@@ -369,19 +372,9 @@ impl Packed {
         }
     }
 
-    /// The packed index of a particle entity, if it was packed. The map behind it is built on
-    /// first use (4 B per entity id), so a step that never asks costs nothing for it.
+    /// The packed index of a particle entity, if it was packed.
     pub fn index_of(&self, e: Entity) -> Option<usize> {
-        let map = self.index_by_id.get_or_init(|| {
-            let max_id = self.entities.iter().map(|e| e.id()).max();
-            let mut index_of = vec![u32::MAX; max_id.map_or(0, |m| m as usize + 1)];
-            for (i, e) in self.entities.iter().enumerate() {
-                index_of[e.id() as usize] = i as u32;
-            }
-            index_of
-        });
-        let i = *map.get(e.id() as usize)? as usize;
-        (self.entities.get(i) == Some(&e)).then_some(i)
+        self.topology.index_of(e)
     }
 
     /// Stretch `δ = |x_b − x_a| − l0` of spring `s`.

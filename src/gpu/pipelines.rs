@@ -60,13 +60,18 @@ impl Specialisation {
                 .iter()
                 .filter(live)
                 .any(|&k| lin[k as usize].q != 0.0)
-                || packed.grids.iter().flat_map(|g| &g.links).any(|l| {
-                    // The closed form responds to δ̇ even undamped (q = cos ωh − 1).
-                    integrator == Integrator::Harmonic || grid::link_coefficients(l, h).q != 0.0
-                }),
+                || packed
+                    .topology
+                    .grids
+                    .iter()
+                    .flat_map(|g| &g.links)
+                    .any(|l| {
+                        // The closed form responds to δ̇ even undamped (q = cos ωh − 1).
+                        integrator == Integrator::Harmonic || grid::link_coefficients(l, h).q != 0.0
+                    }),
             pins: packed.inv_mass.contains(&0.0),
             update: u32::from(integrator == Integrator::ExplicitEuler),
-            grids: !packed.grids.is_empty(),
+            grids: !packed.topology.grids.is_empty(),
         }
     }
 

@@ -53,7 +53,7 @@ pub(super) fn fill_state(packed: &Packed, pos: &mut Vec<Position>, vel: &mut Vec
 /// nominal force, then the grids' links (`grid_pass`'s).
 pub(super) fn grid_device(packed: &Packed, h: f64, harmonic: bool) -> (Vec<grid::Fix>, Vec<Coef>) {
     let (mut fixes, mut links) = (Vec::new(), Vec::new());
-    for g in &packed.grids {
+    for g in &packed.topology.grids {
         let lin = if harmonic {
             let (lin, f) = grid::harmonic_grid(g, &packed.inv_mass, h);
             fixes.extend(f);
@@ -146,7 +146,7 @@ impl GpuSolver {
         integrator: Integrator,
     ) -> Result<(), GpuError> {
         self.contacts = None;
-        if !packed.grids.is_empty() && !integrator.runs_on_gpu_grids() {
+        if !packed.topology.grids.is_empty() && !integrator.runs_on_gpu_grids() {
             return Err(GpuError::Device {
                 adapter: self.ctx.describe(),
                 what: format!("{integrator} does not step cloth grids kept whole"),
@@ -181,6 +181,7 @@ impl GpuSolver {
             .chain(fixes.iter().chain(&fixes).map(|f| [f.a as u32, f.b as u32]))
             .chain(
                 packed
+                    .topology
                     .grids
                     .iter()
                     .flat_map(|g| &g.links)
@@ -223,8 +224,8 @@ impl GpuSolver {
                 ..Range::default()
             })
             .collect();
-        let (mut links, mut grids) = (0, Vec::with_capacity(packed.grids.len()));
-        for g in &packed.grids {
+        let (mut links, mut grids) = (0, Vec::with_capacity(packed.topology.grids.len()));
+        for g in &packed.topology.grids {
             grids.push((g.base, g.cols * g.rows));
             ranges.push(Range {
                 start: g.base,
@@ -243,7 +244,12 @@ impl GpuSolver {
             colour_bytes[at..at + range_size].copy_from_slice(bytemuck::bytes_of(r));
         }
         // Per spring, then (with grids) per particle: what grid_pass summed, zero elsewhere.
-        let sdv_len = springs_len + if packed.grids.is_empty() { 0 } else { n };
+        let sdv_len = springs_len
+            + if packed.topology.grids.is_empty() {
+                0
+            } else {
+                n
+            };
         let params = Params {
             gravity: gravity.as_vec3().to_array(),
             h: h as f32,

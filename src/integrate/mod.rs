@@ -124,10 +124,12 @@ impl Solver {
         if self.h == h && self.sized_for == (n, m) {
             return Ok(());
         }
-        if !packed.grids.is_empty() && !self.integrator.runs_on_grids(self.exact_displacement) {
+        if !packed.topology.grids.is_empty()
+            && !self.integrator.runs_on_grids(self.exact_displacement)
+        {
             return Err(SimError::GridsUnsupported(self.integrator));
         }
-        if !packed.grids.is_empty() {
+        if !packed.topology.grids.is_empty() {
             let law = if self.integrator == Integrator::Harmonic {
                 grid::GridLaw::Harmonic
             } else {
@@ -253,7 +255,7 @@ impl Solver {
                     false,
                 );
                 particle_pass(packed, &self.sdv, &self.sdx, g, h, update);
-                if !packed.grids.is_empty() {
+                if !packed.topology.grids.is_empty() {
                     self.grid.run(packed, &self.sdv, g, h, update);
                 }
             }
@@ -533,13 +535,14 @@ fn particle_pass(
     update: Update,
 ) {
     let Packed {
+        topology,
         x,
         v,
         inv_mass,
         incidence,
-        loose,
         ..
     } = packed;
+    let loose = &topology.loose;
     let (inv_mass, inc) = (&inv_mass[..], &*incidence);
     for range in loose.iter() {
         let first = range.start;

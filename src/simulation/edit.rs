@@ -22,13 +22,15 @@ pub(super) fn valid_part(scene: &Scene, what: &str) -> Result<(), Error> {
 impl Simulation {
     /// Holds particle `index` (scene order) at `target`, at rest: the mouse drag of a viewer,
     /// a hand picking cloth up. A free particle is pinned until [`Self::release`]; a pinned
-    /// one is moved. Re-gathers on the next step (like any World change).
+    /// one is moved. Neither re-gathers the World: moving a pinned particle writes its state,
+    /// pinning a free one refreshes the springs touching it on the next step.
     pub fn grab(&mut self, index: usize, target: DVec3) -> Result<(), SimError> {
         if !target.is_finite() {
             return Err(SimError::BadPosition(target));
         }
         let entity = self.particle_entity(index)?;
-        if self.world.get::<&Pin>(entity).is_err() {
+        let was_pinned = self.world.get::<&Pin>(entity).is_ok();
+        if !was_pinned {
             self.world
                 .insert_one(entity, Pin)
                 .map_err(|_| SimError::NoParticle { index })?;
@@ -38,19 +40,46 @@ impl Simulation {
             p.position = target;
             p.velocity = DVec3::ZERO;
         }
-        self.dirty = true;
+        self.edited(index, (!was_pinned).then_some(true), Some(target));
         Ok(())
     }
 
-    /// Lets go of a particle [`Self::grab`] pinned (one pinned by its scene stays pinned).
+    /// Lets go of a particle [`Self::grab`] pinned (one pinned by its scene stays pinned); it
+    /// starts at rest.
     pub fn release(&mut self, index: usize) -> Result<(), SimError> {
         let entity = self.particle_entity(index)?;
         if let Some(k) = self.grabbed.iter().position(|&e| e == entity) {
             self.grabbed.swap_remove(k);
-            let _ = self.world.remove_one::<Pin>(entity);
-            self.dirty = true;
+            self.free(index, entity);
         }
         Ok(())
+    }
+
+    /// Records an edit of particle `index` that the World already holds, for the next step:
+    /// its pin set or freed, and a pinned particle moved to `at`. After a World change the
+    /// next step re-gathers instead and reads it there.
+    fn edited(&mut self, index: usize, pin: Option<bool>, at: Option<DVec3>) {
+        if self.dirty {
+            return;
+        }
+        if let Some(x) = at {
+            self.packed.x[index] = x;
+            self.packed.v[index] = DVec3::ZERO;
+            self.state_edited = true;
+        }
+        if let Some(pinned) = pin {
+            self.pins.push((index, pinned));
+        }
+    }
+
+    /// Takes the pin off particle `index` (entity `e`); it starts at rest.
+    fn free(&mut self, index: usize, e: Entity) {
+        if self.world.remove_one::<Pin>(e).is_ok() {
+            if let Ok(mut p) = self.world.get::<&mut crate::Particle>(e) {
+                p.velocity = DVec3::ZERO;
+            }
+            self.edited(index, Some(false), None);
+        }
     }
 
     /// The cloths, each with its particles' range in scene order (see [`Self::positions`]);
@@ -198,27 +227,32 @@ impl Simulation {
         Ok(())
     }
 
-    /// Pins particle `index` (scene order) where it is. Re-gathers on the next step.
+    /// Pins particle `index` (scene order) where it is. The next step refreshes the springs
+    /// touching it (no re-gather).
     pub fn pin(&mut self, index: usize) -> Result<(), SimError> {
         let e = self.particle_entity(index)?;
-        let _ = self.world.insert_one(e, Pin);
         self.grabbed.retain(|g| *g != e);
-        self.dirty = true;
+        if self.world.get::<&Pin>(e).is_err() {
+            let _ = self.world.insert_one(e, Pin);
+            self.edited(index, Some(true), None);
+        }
         Ok(())
     }
 
-    /// Frees particle `index` (scene order) from its pin.
+    /// Frees particle `index` (scene order) from its pin; it starts at rest. The next step
+    /// refreshes the springs touching it (no re-gather); it fails then, naming the particle,
+    /// if its mass is not valid.
     pub fn unpin(&mut self, index: usize) -> Result<(), SimError> {
         let e = self.particle_entity(index)?;
-        let _ = self.world.remove_one::<Pin>(e);
         self.grabbed.retain(|g| *g != e);
-        self.dirty = true;
+        self.free(index, e);
         Ok(())
     }
 
     /// The entity of particle `index` in scene order.
     pub fn particle_entity(&self, index: usize) -> Result<Entity, SimError> {
         self.packed
+            .topology
             .entities
             .get(index)
             .copied()

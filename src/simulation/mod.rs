@@ -58,7 +58,13 @@ pub struct Simulation {
     config: SimConfig,
     packed: Packed,
     solver: Solver,
+    /// The World changed: the next step re-gathers it (topology and state).
     dirty: bool,
+    /// Pins set or freed since the last step (packed index, pinned): the next step refreshes
+    /// the mass split only ([`Packed::repin`]).
+    pins: Vec<(usize, bool)>,
+    /// Pinned particles moved since the last step: the device needs the state again.
+    state_edited: bool,
     /// The automatic step choice, when `auto_substeps` is on.
     choice: Option<StepChoice>,
     /// Whether the passes run on rayon's pool (large scenes only).
@@ -169,6 +175,8 @@ impl Simulation {
             packed: Packed::default(),
             solver: Solver::new(config.integrator, config.exact_displacement, config.gravity),
             dirty: true,
+            pins: Vec::new(),
+            state_edited: false,
             grabbed: Vec::new(),
             cloths: Vec::new(),
             next_cloth: 0,
@@ -259,7 +267,7 @@ impl Simulation {
         if !keep_solver {
             self.solver = Solver::new(config.integrator, config.exact_displacement, config.gravity);
         }
-        if self.gather_options() != self.packed.options {
+        if self.gather_options() != self.packed.topology.options {
             // The new integrator or back end takes the cloths in another form.
             self.dirty = true;
             return self.gather();

@@ -16,7 +16,7 @@ pub(super) fn contain(packed: &mut Packed, world: &World, found: &mut Vec<usize>
             // Gather refuses non-finite positions and scatter writes only finite ones, so the
             // World's position is finite; the origin is only a last resort.
             packed.x[i] = world
-                .get::<&crate::components::Particle>(packed.entities[i])
+                .get::<&crate::components::Particle>(packed.topology.entities[i])
                 .map_or(DVec3::ZERO, |p| p.position);
             packed.v[i] = DVec3::ZERO;
             found.push(i);
@@ -35,7 +35,7 @@ impl Simulation {
         self.contained.sort_unstable();
         self.contained.dedup();
         for &i in &self.contained {
-            let e = self.packed.entities[i];
+            let e = self.packed.topology.entities[i];
             let was_pinned = self.packed.inv_mass[i] == 0.0;
             let q = Quarantined {
                 step: self.steps,

@@ -31,9 +31,7 @@ impl Simulation {
         if self.props.is_some() {
             return Err(SimError::OwnBodies);
         }
-        if self.dirty {
-            self.gather()?;
-        }
+        self.sync()?;
         let stage = self.user_stage.get_or_insert_with(|| {
             let mut s = ContactStage::new(self.contact);
             s.gather(&self.world, &self.packed);
@@ -47,7 +45,8 @@ impl Simulation {
 
     /// The step order, the one place it is written (both [`Self::step`] and
     /// [`Self::step_with`] run it):
-    /// 1. gather: World → packed buffers, only when the World changed;
+    /// 1. gather: World → packed buffers, only when the World changed (a pin set or freed
+    ///    refreshes the mass split only, a pinned particle moved writes the state only);
     /// 2. per substep: the integrate kernel (CPU, or the device's, all substeps in one submit
     ///    when nothing on the CPU needs the state between them), then, with bodies, the contact
     ///    stage (rapier steps the bodies, attachments follow them, particles are pushed out of
@@ -60,9 +59,7 @@ impl Simulation {
         let t0 = Instant::now();
         let gathered = self.dirty;
         self.contained.clear();
-        if self.dirty {
-            self.gather()?;
-        }
+        self.sync()?;
         let t1 = Instant::now();
         let h = self.config.h();
         let substeps = self.config.substeps;
@@ -197,11 +194,59 @@ impl Simulation {
         }
     }
 
+    /// Brings the packed buffers up to date with the edits since the last step: a World change
+    /// re-gathers everything, pins set or freed refresh the mass split, pinned particles moved
+    /// go to the device.
+    pub(super) fn sync(&mut self) -> Result<(), SimError> {
+        if self.dirty {
+            return self.gather();
+        }
+        if !self.pins.is_empty() {
+            // A freed particle takes its mass from the World, which holds it.
+            let (world, entities) = (&self.world, &self.packed.topology.entities);
+            let pins: Vec<(usize, Option<f64>)> = self
+                .pins
+                .drain(..)
+                .map(|(i, pinned)| {
+                    let mass = || {
+                        let p = entities.get(i).map(|&e| world.get::<&crate::Particle>(e));
+                        p.and_then(Result::ok).map_or(f64::NAN, |p| p.mass)
+                    };
+                    (i, (!pinned).then(mass))
+                })
+                .collect();
+            if let Err(e) = self.packed.repin(&pins) {
+                // The World holds the edit: the next step gathers it and reports it again.
+                self.dirty = true;
+                return Err(e);
+            }
+            self.state_edited = false;
+            return self.refresh();
+        }
+        #[cfg(feature = "gpu")]
+        if self.state_edited {
+            if let Some(gpu) = &mut self.gpu {
+                gpu.write_state(&self.packed);
+            }
+        }
+        self.state_edited = false;
+        Ok(())
+    }
+
     pub(super) fn gather(&mut self) -> Result<(), SimError> {
+        self.pins.clear();
+        self.state_edited = false;
         let options = self.gather_options();
         // In place: the old buffers go before the new ones are made (never two copies), and
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
+        self.refresh()
+    }
+
+    /// Everything after the buffers changed: the checks, the step choice, the solver's
+    /// coefficients, the contact stages and the device's copy.
+    fn refresh(&mut self) -> Result<(), SimError> {
+        let options = self.gather_options();
         // Frozen before anything reads them: particles with a velocity set non-finite from
         // outside, and the free ends of springs beyond f32's range (the device's precision,
         // where they turn non-finite at once; the CPU does the same so the back ends agree).

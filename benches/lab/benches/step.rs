@@ -1,5 +1,7 @@
-//! Criterion bench: one substep of each integrator on the 128×128 hanging cloth
-//! (16,384 particles, 97,026 springs). Throughput is reported in springs per substep.
+//! Criterion bench on the 128×128 hanging cloth (16,384 particles, 97,026 springs): one
+//! substep of each integrator (throughput in springs per substep), and one 60 Hz frame with
+//! the run-time edits a game makes (a drag, a pin set and freed) beside the same edits made
+//! as a World change, which re-gathers everything.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use harmonic::glam::DVec3;
@@ -27,5 +29,46 @@ fn substep(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, substep);
+fn edits(c: &mut Criterion) {
+    use harmonic::Simulation;
+    let scene = harmonic::internals::hanging_cloth(128);
+    let mut group = c.benchmark_group("frame/cloth128");
+    group.sample_size(10);
+    let at = |f: u64| DVec3::new(0.2 * (f as f64 * 0.05).sin(), 1.0, 0.1);
+    type Edit = fn(&mut Simulation, u64, DVec3);
+    let cases: [(&str, Edit); 4] = [
+        ("no edit", |_, _, _| {}),
+        ("drag (grab)", |sim, _, at| sim.grab(8000, at).unwrap()),
+        ("drag (World change)", |sim, _, at| {
+            let e = sim.particle_entity(8000).unwrap();
+            let world = sim.world_mut();
+            let _ = world.insert_one(e, harmonic::Pin);
+            let mut p = world.get::<&mut harmonic::Particle>(e).unwrap();
+            p.position = at;
+            p.velocity = DVec3::ZERO;
+        }),
+        ("pin set or freed", |sim, f, _| {
+            if f % 2 == 0 {
+                sim.pin(8000).unwrap();
+            } else {
+                sim.unpin(8000).unwrap();
+            }
+        }),
+    ];
+    for (name, edit) in cases {
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        sim.step().unwrap();
+        let mut f = 0u64;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                f += 1;
+                edit(&mut sim, f, at(f));
+                sim.step().unwrap();
+            })
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, substep, edits);
 criterion_main!(benches);

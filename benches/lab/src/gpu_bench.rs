@@ -84,7 +84,7 @@ fn springs_one_by_one(mut world: World) -> Result<World, SimError> {
     for e in cloths {
         let _ = world.despawn(e);
     }
-    let e = &packed.entities;
+    let e = &packed.topology.entities;
     for s in &packed.springs[own..] {
         world.spawn((Spring {
             a: e[s.a as usize],

@@ -244,7 +244,7 @@ impl GridPass {
         self.grids.clear();
         self.fixes.clear();
         self.vector = Vector::chosen();
-        for g in &packed.grids {
+        for g in &packed.topology.grids {
             let lin = match law {
                 GridLaw::Euler => g.links.iter().map(|l| link_coefficients(l, h)).collect(),
                 GridLaw::Harmonic => {
@@ -308,13 +308,14 @@ impl GridPass {
 
     fn run_pass(&mut self, packed: &mut Packed, sdv: &[DVec3], g: DVec3, h: f64, update: Update) {
         let Packed {
+            topology,
             x,
             v,
             inv_mass,
-            grids,
             incidence,
             ..
         } = packed;
+        let grids = &topology.grids;
         let (Some(first), Some(last)) = (grids.first(), grids.last()) else {
             return;
         };
@@ -396,7 +397,7 @@ mod tests {
                 colouring: false,
             };
             let mut start = Packed::gather_with(&built.world, options).unwrap();
-            assert_eq!(start.grids.len(), 1);
+            assert_eq!(start.topology.grids.len(), 1);
             // A twist, so every spring is stretched and moving.
             for (i, (x, v)) in start.x.iter_mut().zip(&mut start.v).enumerate() {
                 let t = i as f64 * 0.37;
