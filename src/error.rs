@@ -5,6 +5,16 @@ use std::path::PathBuf;
 
 use hecs::Entity;
 
+/// A vector in messages, each coordinate as `{:?}` prints it: exponents for very large or
+/// small values instead of hundreds of digits.
+pub(crate) struct V(pub glam::DVec3);
+
+impl fmt::Display for V {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "[{:?}, {:?}, {:?}]", self.0.x, self.0.y, self.0.z)
+    }
+}
+
 /// One semantic problem in a scene, named by its entry (`springs[3].b`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Issue {
@@ -85,11 +95,14 @@ pub enum SimError {
         particle: Entity,
     },
     /// A config's frame step `dt` is not finite and > 0.
-    #[error("time step must be finite and > 0, got {0}")]
+    #[error("time step must be finite and > 0, got {0:?}")]
     BadStep(f64),
     /// [`crate::Simulation::advance`] was given a frame time that is not finite and ≥ 0.
-    #[error("frame time must be finite and ≥ 0, got {0}")]
+    #[error("frame time must be finite and ≥ 0, got {0:?}")]
     BadFrameTime(f64),
+    /// `SimConfig::strain_limit` is not > 0.
+    #[error("strain limit must be > 0 (infinite: not checked), got {0:?}")]
+    BadStrainLimit(f64),
     /// A config asks for 0 substeps per frame.
     #[error("substeps must be ≥ 1")]
     NoSubsteps,
@@ -116,7 +129,7 @@ pub enum SimError {
         index: usize,
     },
     /// A target position given to [`crate::Simulation::grab`] is not finite.
-    #[error("position must be finite, got {0}")]
+    #[error("position must be finite, got {}", V(*.0))]
     BadPosition(glam::DVec3),
     /// A scene given to [`crate::Simulation::from_scene`] fails validation: every problem.
     #[error("invalid scene: {}", join_issues(.0))]

@@ -66,7 +66,7 @@ pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
-pub use schedule::StepStats;
+pub use schedule::{Failure, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
 pub use step_control::StepChoice;
 

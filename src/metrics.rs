@@ -34,6 +34,57 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
     }
 }
 
+/// How far the cloth is stretched: the largest extension `δ/l0` of any spring (its tension),
+/// and apart the largest compression `−δ/l0` (a fold or a bend shortens springs without
+/// stretching the cloth). NaN where any spring's is.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stretch {
+    pub tension: f64,
+    pub compression: f64,
+}
+
+/// [`Stretch`] of the packed state.
+pub fn stretch(packed: &Packed) -> Stretch {
+    let one = |s: PackedSpring| {
+        let e = packed.stretch(&s) / s.rest;
+        Stretch {
+            tension: if e.is_nan() { e } else { e.max(0.0) },
+            compression: if e.is_nan() { e } else { (-e).max(0.0) },
+        }
+    };
+    let join = |a: Stretch, b: Stretch| Stretch {
+        tension: nan_max(a.tension, b.tension),
+        compression: nan_max(a.compression, b.compression),
+    };
+    if packed.spring_count() < PAR_MIN {
+        packed.all_springs().map(one).fold(Stretch::default(), join)
+    } else {
+        packed.par_springs().map(one).reduce(Stretch::default, join)
+    }
+}
+
+/// The spring stretched most: its index in [`Packed::all_springs`] order (the first among
+/// equals) and its `δ/l0`. Sequential: for reports, not for every frame.
+pub fn most_stretched(packed: &Packed) -> Option<(usize, f64)> {
+    let mut best: Option<(usize, f64)> = None;
+    for (k, s) in packed.all_springs().enumerate() {
+        let e = packed.stretch(&s) / s.rest;
+        if best.is_none_or(|(_, b)| e > b || (e.is_nan() && !b.is_nan())) {
+            best = Some((k, e));
+        }
+    }
+    best
+}
+
+/// The larger of two values, NaN if either is (a broken state cannot report a small one).
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
 /// Largest `|δ|/l0` over all springs; NaN if any spring's is.
 pub fn max_strain(packed: &Packed) -> f64 {
     let strain = |s: PackedSpring| packed.stretch(&s).abs() / s.rest;

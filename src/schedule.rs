@@ -20,6 +20,58 @@ pub struct StepStats {
     /// Particles this frame found non-finite and quarantined (frozen at their last finite
     /// position; [`crate::Simulation::quarantined`] lists them all).
     pub quarantined: usize,
+    /// Why this frame's state, though finite, is not to be trusted (None: nothing found).
+    pub failure: Option<Failure>,
+}
+
+/// A frame whose state is finite but wrong: the engine reports it, never as success.
+/// [`crate::Diagnostics::failure`] keeps the first one of a run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Failure {
+    /// A spring stretched past [`crate::SimConfig::strain_limit`]: the step is too large for
+    /// the springs (the state is blowing up), or the scene stretches further than its limit.
+    Strain {
+        /// The frame (1 for the first step).
+        frame: u64,
+        /// The spring stretched most (index in the simulation's spring order).
+        spring: usize,
+        /// Its extension `δ/l0`.
+        strain: f64,
+        /// The limit it passed.
+        limit: f64,
+        /// The integrator that stepped it.
+        integrator: crate::Integrator,
+        /// That spring's `h/h_c` (`h_c = π/ω0`).
+        step_ratio: f64,
+        /// Substeps of the frame.
+        substeps: u32,
+    },
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Failure::Strain {
+                frame,
+                spring,
+                strain,
+                limit,
+                integrator,
+                step_ratio,
+                substeps,
+            } => write!(
+                f,
+                "frame {frame}: spring {spring} is stretched {:.4e} % past its rest length, beyond \
+                 the strain limit of {:.4e} % ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} \
+                 for that spring). A blow-up: lower dt, raise the substeps or leave them automatic, \
+                 or choose a more stable integrator; if the scene means to stretch this far, raise \
+                 `strain_limit`",
+                100.0 * strain,
+                100.0 * limit
+            ),
+        }
+    }
 }
 
 impl StepStats {

@@ -65,14 +65,26 @@ fn run_prints_a_summary_and_writes_the_trajectory() {
 #[test]
 fn run_reports_a_blow_up_with_a_non_zero_exit() {
     // At the paper's one step per frame; by default step control subdivides and it stays bounded.
-    let out = harmonic(&[
-        "run",
-        "scenes/paper_fig1_near_rigid.ron",
-        "--steps",
-        "600",
-        "--substeps",
-        "1",
-    ]);
+    let run = |limit: &[&str]| {
+        let mut args = vec![
+            "run",
+            "scenes/paper_fig1_near_rigid.ron",
+            "--steps",
+            "600",
+            "--substeps",
+            "1",
+        ];
+        args.extend(limit);
+        harmonic(&args)
+    };
+    // The strain limit stops it while it is still finite ...
+    let out = run(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("run failed at frame"), "{stderr}");
+    assert!(stderr.contains("strain limit"), "{stderr}");
+    // ... and without it the state goes non-finite and is quarantined.
+    let out = run(&["--strain-limit", "inf"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(

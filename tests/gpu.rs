@@ -144,6 +144,7 @@ fn parity_config(world: &World, omega: f64, zeta: f64, integrator: Integrator) -
         integrator,
         exact_displacement: false,
         backend: Backend::Cpu,
+        ..SimConfig::default()
     }
 }
 

@@ -65,6 +65,7 @@ fn spring_and_substep_limits_are_checked() {
         max_particles: 1 << 20,
         max_springs: 1000,
         max_substeps: 8,
+        ..Limits::DEFAULT
     };
     // 20×20 with shear and bend: 2·19·20 + 2·19² + 2·18·20 = 760 + 722 + 720 springs.
     let msg = messages(Scene::parse_with(&cloth(20), "c.ron", &tight).unwrap_err());

@@ -45,9 +45,12 @@ struct LimitArgs {
     /// Refuse scenes with more springs than this.
     #[arg(long, default_value_t = Limits::DEFAULT.max_springs)]
     max_springs: u64,
-    /// Refuse scenes fixing more substeps per frame than this.
+    /// Refuse scenes, and --substeps, fixing more substeps per frame than this.
     #[arg(long, default_value_t = Limits::DEFAULT.max_substeps)]
     max_substeps: u32,
+    /// Refuse runs of more frames than this (seconds / dt, or --steps).
+    #[arg(long, default_value_t = Limits::DEFAULT.max_frames)]
+    max_frames: u64,
 }
 
 impl LimitArgs {
@@ -56,6 +59,82 @@ impl LimitArgs {
             max_particles: self.max_particles,
             max_springs: self.max_springs,
             max_substeps: self.max_substeps,
+            max_frames: self.max_frames,
+        }
+    }
+}
+
+/// The frames of a run: `--steps`, else `seconds` (the flag's, the scene's, else 1 s) at `dt`;
+/// refused, naming the flag, when not a time > 0 or over `--max-frames`.
+fn frames(
+    steps: Option<u64>,
+    flag: Option<f64>,
+    scene: Option<f64>,
+    dt: f64,
+    limits: &Limits,
+) -> Result<u64, String> {
+    if let Some(n) = steps {
+        if n == 0 || n > limits.max_frames {
+            return Err(format!(
+                "--steps {n}: expected 1 to {} frames (--max-frames)",
+                limits.max_frames
+            ));
+        }
+        return Ok(n);
+    }
+    let (what, seconds) = match (flag, scene) {
+        (Some(t), _) => ("--seconds", t),
+        (None, Some(t)) => ("the scene's seconds", t),
+        (None, None) => ("the default 1 s", 1.0),
+    };
+    limits
+        .frames(seconds, dt)
+        .map_err(|e| format!("{what}: {e}"))
+}
+
+/// Progress on stderr: a bar on a terminal, else a plain line at every tenth of the run.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    total: u64,
+    tenth: u64,
+}
+
+impl Progress {
+    fn new(total: u64) -> Self {
+        Progress {
+            bar: progress_bar(total),
+            total,
+            tenth: 0,
+        }
+    }
+
+    fn set(&mut self, done: u64, t: f64) {
+        match &self.bar {
+            Some(b) => b.set_position(done),
+            None => {
+                let tenth = done * 10 / self.total.max(1);
+                if tenth > self.tenth {
+                    self.tenth = tenth;
+                    eprintln!(
+                        "progress: frame {done} of {} ({} %), t = {t:.3} s",
+                        self.total,
+                        tenth * 10
+                    );
+                }
+            }
+        }
+    }
+
+    fn println(&self, line: String) {
+        match &self.bar {
+            Some(b) => b.println(line),
+            None => println!("{line}"),
+        }
+    }
+
+    fn finish(self) {
+        if let Some(b) = self.bar {
+            b.finish_and_clear();
         }
     }
 }
@@ -121,6 +200,10 @@ struct RunArgs {
     /// Write `step,time,particle,x,y,z,vx,vy,vz` rows (scene order) to this CSV file.
     #[arg(long)]
     trajectory: Option<PathBuf>,
+    /// Override the scene's strain limit: the largest stretch δ/l0 before the run fails as a
+    /// blow-up (default 10; `inf`: not checked).
+    #[arg(long)]
+    strain_limit: Option<f64>,
     /// Record every M-th frame in the trajectory (step 0 always).
     #[arg(long, default_value_t = 1)]
     every: u64,
@@ -163,19 +246,36 @@ fn render(args: RenderArgs) -> Result<(), String> {
         Some((w, h)) => parse(w).zip(parse(h)),
         None => None,
     }
-    .ok_or_else(|| format!("--size {}: expected WIDTHxHEIGHT, e.g. 800x600", args.size))?;
-    if args.frames == 0 {
-        return Err("--frames must be ≥ 1".into());
+    .filter(|&(w, h)| w <= 8192 && h <= 8192)
+    .ok_or_else(|| {
+        format!(
+            "--size {}: expected WIDTHxHEIGHT, each a whole number of pixels from 1 to 8192, e.g. 800x600",
+            args.size
+        )
+    })?;
+    if !(args.strain_scale.is_finite() && args.strain_scale > 0.0) {
+        return Err(format!(
+            "--strain-scale {:?}: expected the strain drawn fully red, finite and > 0 (0.1 is 10 %)",
+            args.strain_scale
+        ));
     }
     let limits = args.limits.limits();
-    let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
-    let mut sim = Simulation::from_scene_with(&scene, &limits).map_err(|e| e.to_string())?;
-    let seconds = args.seconds.or(scene.seconds).unwrap_or(1.0);
-    if !(seconds.is_finite() && seconds >= 0.0) {
-        return Err(format!("--seconds {seconds}: expected a finite time ≥ 0"));
-    }
+    // The run's length is checked below, where --steps and --seconds override the scene's.
+    let load = Limits {
+        max_frames: u64::MAX,
+        ..limits
+    };
+    let scene = Scene::load_with(&args.scene, &load).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::from_scene_with(&scene, &load).map_err(|e| e.to_string())?;
     let dt = sim.config().dt;
-    let steps = (seconds / dt).round() as u64;
+    let steps = frames(None, args.seconds, scene.seconds, dt, &limits)?;
+    let seconds = steps as f64 * dt;
+    if args.frames == 0 || u64::from(args.frames) > steps {
+        return Err(format!(
+            "--frames {}: expected 1 to {steps} pictures (one per frame of the run at most)",
+            args.frames
+        ));
+    }
     let mut offscreen = Offscreen::new(width, height).map_err(|e| e.to_string())?;
     println!(
         "render: {} on {}, {width}x{height}, {} picture(s) over {seconds} s",
@@ -196,16 +296,25 @@ fn render(args: RenderArgs) -> Result<(), String> {
         .scene
         .file_stem()
         .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
-    let bar = progress_bar(steps);
+    let mut bar = Progress::new(steps);
     let mut pictures = Vec::new();
     let mut done = 0u64;
     for k in 1..=args.frames {
         let target = (steps as f64 * k as f64 / args.frames as f64).round() as u64;
         while done < target {
-            sim.step().map_err(|e| format!("run stopped: {e}"))?;
+            let stats = *sim.step().map_err(|e| format!("run stopped: {e}"))?;
             done += 1;
-            if let Some(b) = &bar {
-                b.set_position(done);
+            bar.set(done, sim.time());
+            if let Some(f) = stats.failure {
+                return Err(format!("run failed at {f}"));
+            }
+            if stats.quarantined > 0 {
+                return Err(format!(
+                    "run degraded at frame {done}: {} particle(s) went non-finite and were \
+                     quarantined (a step too large for the scene, or a spring that degenerated \
+                     to a point); `harmonic run` prints the details",
+                    stats.quarantined
+                ));
             }
         }
         let now = Camera::of(&sim, 0.05);
@@ -224,17 +333,12 @@ fn render(args: RenderArgs) -> Result<(), String> {
             sim.time(),
             image.cloth_pixels()
         );
-        match &bar {
-            Some(b) => b.println(line),
-            None => println!("{line}"),
-        }
+        bar.println(line);
         if args.sheet {
             pictures.push(image);
         }
     }
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    bar.finish();
     if args.sheet {
         let columns = (pictures.len() as f64).sqrt().ceil() as u32;
         if let Some(sheet) = Image::sheet(&pictures, columns) {
@@ -274,7 +378,30 @@ fn check(paths: &[PathBuf]) -> Result<(), String> {
 }
 
 fn run(args: RunArgs) -> Result<(), String> {
-    let scene = Scene::load_with(&args.scene, &args.limits.limits()).map_err(|e| e.to_string())?;
+    let limits = args.limits.limits();
+    if let Some(k) = args.substeps {
+        if k == 0 || k > limits.max_substeps {
+            return Err(format!(
+                "--substeps {k}: expected 1 to {} per frame (--max-substeps)",
+                limits.max_substeps
+            ));
+        }
+    }
+    if let Some(path) = &args.trajectory {
+        let same = |a: &std::path::Path, b: &std::path::Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b);
+        if same(path, &args.scene) {
+            return Err(format!(
+                "--trajectory {}: that is the scene being run; name another file",
+                path.display()
+            ));
+        }
+    }
+    // The run's length is checked below, where --steps and --seconds override the scene's.
+    let load = Limits {
+        max_frames: u64::MAX,
+        ..limits
+    };
+    let scene = Scene::load_with(&args.scene, &load).map_err(|e| e.to_string())?;
     let built = scene.build();
     let mut config = built.config;
     if let Some(dt) = args.dt {
@@ -291,6 +418,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         config.backend = name.parse().map_err(|e: SimError| e.to_string())?;
     }
     config.exact_displacement |= args.exact_displacement;
+    if let Some(l) = args.strain_limit {
+        config.strain_limit = l;
+    }
     let sim =
         Simulation::with_props(built.world, config, built.props).map_err(|e| e.to_string())?;
     let mut sim = sim;
@@ -298,11 +428,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     if args.every == 0 {
         return Err("--every must be ≥ 1".into());
     }
-    let steps = match (args.steps, args.seconds.or(scene.seconds)) {
-        (Some(n), _) => n,
-        (None, Some(t)) => (t / config.dt).round().max(1.0) as u64,
-        (None, None) => (1.0 / config.dt).round().max(1.0) as u64,
-    };
+    let steps = frames(args.steps, args.seconds, scene.seconds, config.dt, &limits)?;
 
     let mut traj = match &args.trajectory {
         Some(path) => {
@@ -394,10 +520,10 @@ fn run(args: RunArgs) -> Result<(), String> {
             if p.moving() { "every substep" } else { "never (all bodies fixed)" }
         );
     }
-    let mut max_strain = start.max_strain;
+    let (mut max_strain, mut max_compression) = (start.max_strain, start.max_compression);
     let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
     let (mut t_integrate, mut t_contacts) = (0.0, 0.0);
-    let bar = progress_bar(steps);
+    let mut bar = Progress::new(steps);
     let t0 = Instant::now();
     let mut failure = None;
     let mut first_quarantine = None;
@@ -412,9 +538,10 @@ fn run(args: RunArgs) -> Result<(), String> {
             }
             Ok(_) => {}
         }
-        if let Some(b) = &bar {
-            b.set_position(step);
+        if sim.stats().failure.is_some() {
+            break;
         }
+        bar.set(step, sim.time());
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
         if let Some(p) = sim.props() {
@@ -422,7 +549,9 @@ fn run(args: RunArgs) -> Result<(), String> {
             max_depth = max_depth.max(p.stats().max_depth);
             swept += p.stats().swept;
         }
-        max_strain = max_strain.max(harmonic::internals::metrics::max_strain(sim.packed()));
+        let stretch = harmonic::internals::metrics::stretch(sim.packed());
+        max_strain = max_strain.max(stretch.tension);
+        max_compression = max_compression.max(stretch.compression);
         if let Some(w) = traj.as_mut() {
             if step % args.every == 0 {
                 write_rows(w, &sim, step).map_err(|e| e.to_string())?;
@@ -430,9 +559,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     let wall = t0.elapsed().as_secs_f64();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
+    bar.finish();
     if let Some(w) = traj.as_mut() {
         w.flush().map_err(|e| e.to_string())?;
     }
@@ -455,8 +582,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
     println!(
-        "max strain: {:.4} % (largest |δ|/l0 over the run)",
-        100.0 * max_strain
+        "max strain: {:.4} % (the largest stretch δ/l0 over the run; compression apart: {:.4} %)",
+        100.0 * max_strain,
+        100.0 * max_compression
     );
     println!(
         "energy: start {:.6e} J, end {:.6e} J",
@@ -469,6 +597,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
     let quarantined = sim.quarantined();
+    if let Some(f) = sim.diagnostics().failure {
+        return Err(format!("run failed at {f}"));
+    }
     match (failure, first_quarantine) {
         (Some(e), _) => Err(format!("run stopped: {e}")),
         (None, Some(step)) => {

@@ -28,11 +28,17 @@ impl Packed {
             // velocity is not refused: the step quarantines the particle instead.
             let bad = |what: String| SimError::BadParticle { particle: e, what };
             if !p.position.is_finite() {
-                return Err(bad(format!("position must be finite, got {}", p.position)));
+                return Err(bad(format!(
+                    "position must be finite, got {}",
+                    crate::error::V(p.position)
+                )));
             }
             let mass_ok = p.mass.is_finite() && p.mass > 0.0;
             if !(pin.is_some() || mass_ok) {
-                return Err(bad(format!("mass must be finite and > 0, got {}", p.mass)));
+                return Err(bad(format!(
+                    "mass must be finite and > 0, got {:?}",
+                    p.mass
+                )));
             }
         }
         let mut springs: Vec<(Entity, Spring)> = world
@@ -183,13 +189,15 @@ impl Packed {
 /// The rest length, stiffness and damping a spring must have.
 fn check_spring(rest: f64, stiffness: f64, damping: f64) -> Result<(), String> {
     if !(rest.is_finite() && rest > 0.0) {
-        return Err(format!("rest length must be finite and > 0, got {rest}"));
+        return Err(format!("rest length must be finite and > 0, got {rest:?}"));
     }
     if !(stiffness.is_finite() && stiffness >= 0.0) {
-        return Err(format!("stiffness must be finite and ≥ 0, got {stiffness}"));
+        return Err(format!(
+            "stiffness must be finite and ≥ 0, got {stiffness:?}"
+        ));
     }
     if !(damping.is_finite() && damping >= 0.0) {
-        return Err(format!("damping must be finite and ≥ 0, got {damping}"));
+        return Err(format!("damping must be finite and ≥ 0, got {damping:?}"));
     }
     Ok(())
 }

@@ -98,7 +98,7 @@ impl Packed {
             if let Some(m) = mass.filter(|m| !(m.is_finite() && *m > 0.0)) {
                 return Err(SimError::BadParticle {
                     particle: self.topology.entities[i],
-                    what: format!("mass must be finite and > 0, got {m}"),
+                    what: format!("mass must be finite and > 0, got {m:?}"),
                 });
             }
         }

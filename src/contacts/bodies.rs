@@ -4,7 +4,7 @@ use super::*;
 
 /// A keyframe's pose.
 pub(super) fn pose_of(k: &Keyframe) -> Pose {
-    Pose::new(v3(k.position), v3(k.rotation))
+    Pose::new(v3(k.position), axis_angle(k.rotation))
 }
 
 /// The pose on a keyframed path at time `t`: linear in position, spherical in rotation, held
@@ -110,7 +110,7 @@ impl Props {
             BodyKind::KinematicPosition => RigidBodyBuilder::kinematic_position_based(),
         }
         .translation(v3(position))
-        .rotation(v3(rotation))
+        .rotation(axis_angle(rotation))
         .linvel(v3(b.velocity))
         .angvel(v3(b.angular_velocity))
         .linear_damping(b.linear_damping as f32)

@@ -99,3 +99,20 @@ pub struct Props {
 fn v3(v: [f64; 3]) -> Vec3 {
     DVec3::from(v).as_vec3()
 }
+
+/// The largest axis-angle rotation a scene may give (rad): beyond it an f64 angle's remainder
+/// modulo 4π is rounding noise.
+pub(crate) const MAX_ANGLE: f64 = 1e15;
+
+/// An axis-angle rotation in rapier's f32, its angle reduced modulo 4π in f64 first (the same
+/// quaternion): f32 would overflow squaring an angle past about 1.8e19 rad.
+fn axis_angle(v: [f64; 3]) -> Vec3 {
+    let r = DVec3::from(v);
+    let angle = r.length();
+    let period = 4.0 * std::f64::consts::PI;
+    if angle > period {
+        (r * (angle.rem_euclid(period) / angle)).as_vec3()
+    } else {
+        r.as_vec3()
+    }
+}

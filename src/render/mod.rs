@@ -37,7 +37,8 @@ pub struct Style {
     /// springs) instead of its plain colour: blue (unstretched) through green and yellow to
     /// red at `strain_scale` or more.
     pub strain: bool,
-    /// The strain drawn fully red (0 means 10 %).
+    /// The strain drawn fully red; a value that is not finite and > 0 means 10 % (the
+    /// `harmonic render` flag refuses one).
     pub strain_scale: f32,
 }
 

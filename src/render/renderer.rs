@@ -347,7 +347,7 @@ impl Renderer {
                 self.strain[b] = self.strain[b].max(e);
             }
         }
-        let scale = if style.strain_scale > 0.0 {
+        let scale = if style.strain_scale.is_finite() && style.strain_scale > 0.0 {
             style.strain_scale
         } else {
             0.1

@@ -263,6 +263,9 @@ impl Scene {
                     .as_deref()
                     .and_then(|n| n.parse().ok())
                     .unwrap_or_default(),
+                strain_limit: self
+                    .strain_limit
+                    .unwrap_or(crate::config::DEFAULT_STRAIN_LIMIT),
             },
         }
     }

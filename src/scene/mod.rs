@@ -49,15 +49,37 @@ pub struct Limits {
     pub max_springs: u64,
     /// Fixed substeps per frame (the automatic choice caps itself at the same default).
     pub max_substeps: u32,
+    /// Frames one run may take (`seconds / dt`): a typo such as `dt: 1e-12` is refused
+    /// instead of running for days.
+    pub max_frames: u64,
 }
 
 impl Limits {
-    /// The defaults: 2²² particles, 2²⁵ springs and 100 000 fixed substeps per frame.
+    /// The defaults: 2²² particles, 2²⁵ springs, 100 000 fixed substeps per frame and
+    /// 1 000 000 frames a run (4.6 hours at 60 Hz).
     pub const DEFAULT: Limits = Limits {
         max_particles: 1 << 22,
         max_springs: 1 << 25,
         max_substeps: crate::step_control::MAX_SUBSTEPS,
+        max_frames: 1_000_000,
     };
+
+    /// The frames a run of `seconds` at `dt` takes, or why it is refused: a time that is not
+    /// finite and > 0, or more frames than [`Self::max_frames`].
+    pub fn frames(&self, seconds: f64, dt: f64) -> Result<u64, String> {
+        if !(seconds.is_finite() && seconds > 0.0) {
+            return Err(format!("must be finite and > 0, got {seconds:?}"));
+        }
+        let frames = (seconds / dt).round().max(1.0);
+        if frames.is_nan() || frames > self.max_frames as f64 {
+            return Err(format!(
+                "{seconds:?} s at dt {dt:?} s is {frames:?} frames; the limit is {} \
+                 (Limits::max_frames, --max-frames)",
+                self.max_frames
+            ));
+        }
+        Ok(frames as u64)
+    }
 }
 
 impl Default for Limits {
@@ -93,6 +115,9 @@ pub struct Scene {
     /// Default run length for `harmonic run` (s).
     #[serde(default)]
     pub seconds: Option<f64>,
+    /// [`crate::SimConfig::strain_limit`] (absent: its default; `inf`: not checked).
+    #[serde(default)]
+    pub strain_limit: Option<f64>,
     /// Explicit particles: scene indices 0, 1, … in this order.
     #[serde(default)]
     pub particles: Vec<ParticleDef>,
@@ -289,6 +314,7 @@ impl Scene {
             backend: None,
             exact_displacement: false,
             seconds: None,
+            strain_limit: None,
             particles: vec![],
             springs: vec![],
             cloths: vec![],
@@ -327,6 +353,8 @@ impl Scene {
         limits: &Limits,
     ) -> Result<Scene, SceneError> {
         let path: PathBuf = path.as_ref().to_path_buf();
+        // A byte-order mark some editors write is not part of the scene.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let options = ron::Options::default()
             .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
         let scene: Scene = options.from_str(text).map_err(|e| SceneError::Parse {
@@ -394,6 +422,7 @@ pub fn exercise(data: &[u8]) -> Result<crate::Diagnostics, crate::Error> {
         max_particles: 4096,
         max_springs: 32_768,
         max_substeps: 64,
+        max_frames: Limits::DEFAULT.max_frames,
     };
     let text = String::from_utf8_lossy(data);
     let scene = Scene::parse_with(&text, "fuzz.ron", &LIMITS)?;

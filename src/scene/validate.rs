@@ -15,12 +15,12 @@ impl Issues {
     }
     fn positive(&mut self, location: impl Into<String>, v: f64) {
         if !(v.is_finite() && v > 0.0) {
-            self.push(location, format!("must be finite and > 0, got {v}"));
+            self.push(location, format!("must be finite and > 0, got {v:?}"));
         }
     }
     fn non_negative(&mut self, location: impl Into<String>, v: f64) {
         if !(v.is_finite() && v >= 0.0) {
-            self.push(location, format!("must be finite and ≥ 0, got {v}"));
+            self.push(location, format!("must be finite and ≥ 0, got {v:?}"));
         }
     }
     fn finite(&mut self, location: impl Into<String>, v: V3) {
@@ -28,6 +28,47 @@ impl Issues {
             self.push(location, format!("must be finite, got {v:?}"));
         }
     }
+    /// An axis-angle rotation: finite, its angle at most [`crate::contacts::MAX_ANGLE`] (it is
+    /// taken modulo 4π, which beyond that is rounding noise).
+    fn rotation(&mut self, location: impl Into<String>, v: V3) {
+        let location = location.into();
+        let before = self.0.len();
+        self.finite(location.clone(), v);
+        let angle = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+        if self.0.len() == before && (angle.is_nan() || angle > crate::contacts::MAX_ANGLE) {
+            self.push(
+                location,
+                format!(
+                    "an angle of {angle:?} rad has no meaningful remainder modulo 4π; at most {:e}",
+                    crate::contacts::MAX_ANGLE
+                ),
+            );
+        }
+    }
+    /// [`Self::spec`], then the stiffness and damping it gives between masses `m_a`, `m_b`
+    /// within f32's range: the GPU back end's precision, beyond which the step would freeze
+    /// the spring's ends (the CPU does the same, so the back ends agree).
+    fn spec_between(&mut self, at: &str, s: &SpringSpec, m_a: f64, m_b: f64) {
+        let before = self.0.len();
+        self.spec(at, s);
+        if self.0.len() > before || !(m_a > 0.0 && m_b > 0.0) {
+            return;
+        }
+        let (k, c) = s.resolve(m_a, m_b);
+        for (what, v) in [("stiffness", k), ("damping", c)] {
+            if v.is_nan() || v > f32::MAX as f64 {
+                self.push(
+                    at,
+                    format!(
+                        "gives a {what} of {v:?}, beyond f32's range ({:?}), the precision of the \
+                         GPU back end",
+                        f32::MAX
+                    ),
+                );
+            }
+        }
+    }
+
     fn spec(&mut self, at: &str, s: &SpringSpec) {
         match (s.stiffness, s.frequency) {
             (Some(k), None) => self.non_negative(format!("{at}.stiffness"), k),
@@ -84,8 +125,20 @@ impl Scene {
                 );
             }
         }
+        if let Some(l) = self.strain_limit {
+            if l.is_nan() || l <= 0.0 {
+                is.push(
+                    "strain_limit",
+                    format!("must be > 0 (inf: not checked), got {l:?}"),
+                );
+            }
+        }
         if let Some(t) = self.seconds {
-            is.positive("seconds", t);
+            let dt_ok = self.dt.is_finite() && self.dt > 0.0;
+            match limits.frames(t, self.dt) {
+                Err(e) if dt_ok || !(t.is_finite() && t > 0.0) => is.push("seconds", e),
+                _ => {}
+            }
         }
         for (i, p) in self.particles.iter().enumerate() {
             is.finite(format!("particles[{i}].position"), p.position);
@@ -109,7 +162,8 @@ impl Scene {
                 is.push(&at, format!("both ends are particle {}", s.a));
                 ends_ok = false;
             }
-            is.spec(&at, &s.spec());
+            let mass = |i: usize| self.particles.get(i).map_or(0.0, |p| p.mass);
+            is.spec_between(&at, &s.spec(), mass(s.a), mass(s.b));
             if let Some(l) = s.rest_length {
                 is.positive(format!("{at}.rest_length"), l);
             }
@@ -140,12 +194,13 @@ impl Scene {
                     format!("needs ≥ 2 particles each way, got {cols}×{rows}"),
                 );
             }
-            is.spec(&format!("{at}.structural"), &c.structural);
+            let m = c.mass / (cols as f64 * rows as f64);
+            is.spec_between(&format!("{at}.structural"), &c.structural, m, m);
             if let Some(s) = &c.shear {
-                is.spec(&format!("{at}.shear"), s);
+                is.spec_between(&format!("{at}.shear"), s, m, m);
             }
             if let Some(s) = &c.bend {
-                is.spec(&format!("{at}.bend"), s);
+                is.spec_between(&format!("{at}.bend"), s, m, m);
                 if cols < 3 && rows < 3 {
                     is.push(
                         format!("{at}.bend"),
@@ -178,9 +233,10 @@ impl Scene {
             if r.start == r.end {
                 is.push(&at, "start and end coincide: zero-length segments");
             }
-            is.spec(&format!("{at}.spring"), &r.spring);
+            let m = r.mass / r.particles as f64;
+            is.spec_between(&format!("{at}.spring"), &r.spring, m, m);
             if let Some(s) = &r.bend {
-                is.spec(&format!("{at}.bend"), s);
+                is.spec_between(&format!("{at}.bend"), s, m, m);
             }
         }
         self.validate_props(&mut is);
@@ -205,7 +261,7 @@ impl Scene {
         for (i, b) in self.bodies.iter().enumerate() {
             let at = format!("bodies[{i}]");
             is.finite(format!("{at}.position"), b.position);
-            is.finite(format!("{at}.rotation"), b.rotation);
+            is.rotation(format!("{at}.rotation"), b.rotation);
             is.finite(format!("{at}.velocity"), b.velocity);
             is.finite(format!("{at}.angular_velocity"), b.angular_velocity);
             match (b.mass, b.density) {
@@ -215,7 +271,12 @@ impl Scene {
                 (None, None) => {}
             }
             is.non_negative(format!("{at}.friction"), b.friction);
-            is.non_negative(format!("{at}.restitution"), b.restitution);
+            if !(0.0..=1.0).contains(&b.restitution) {
+                is.push(
+                    format!("{at}.restitution"),
+                    format!("must be in [0, 1], got {:?}", b.restitution),
+                );
+            }
             is.non_negative(format!("{at}.linear_damping"), b.linear_damping);
             is.non_negative(format!("{at}.angular_damping"), b.angular_damping);
             if !b.path.is_empty() && b.kind != super::props::BodyKind::KinematicPosition {
@@ -231,12 +292,12 @@ impl Scene {
             for (k, key) in b.path.iter().enumerate() {
                 let kt = format!("{at}.path[{k}]");
                 is.finite(format!("{kt}.position"), key.position);
-                is.finite(format!("{kt}.rotation"), key.rotation);
+                is.rotation(format!("{kt}.rotation"), key.rotation);
                 if !(key.time.is_finite() && key.time >= 0.0 && key.time > last) {
                     is.push(
                         format!("{kt}.time"),
                         format!(
-                            "must be finite, ≥ 0 and after the keyframe before, got {}",
+                            "must be finite, ≥ 0 and after the keyframe before, got {:?}",
                             key.time
                         ),
                     );
@@ -309,8 +370,24 @@ impl Scene {
                 }
             }
             if is.0.iter().all(|e| !e.location.starts_with(&sh)) {
-                if let Err(e) = crate::contacts::collider_of(&b.shape) {
-                    is.push(&sh, e);
+                match crate::contacts::collider_of(&b.shape) {
+                    Err(e) => is.push(&sh, e),
+                    // rapier gives a dynamic body the mass of its shape's volume; with none,
+                    // mass 0, it would silently behave as fixed.
+                    Ok(co) if b.kind == super::props::BodyKind::Dynamic && b.mass.is_none() => {
+                        let density = b.density.unwrap_or(1000.0);
+                        let mass = co.density(density as f32).build().mass();
+                        if !(mass.is_finite() && mass > 0.0) {
+                            is.push(
+                                &sh,
+                                format!(
+                                    "encloses no volume, so a dynamic body gets mass {mass:?} from its \
+                                     density; give the body a `mass`, or a shape with volume"
+                                ),
+                            );
+                        }
+                    }
+                    Ok(_) => {}
                 }
             }
         }
@@ -330,12 +407,24 @@ impl Scene {
             if !(0.0..=1.0).contains(&c.restitution) {
                 is.push(
                     "contact.restitution",
-                    format!("must be in [0, 1], got {}", c.restitution),
+                    format!("must be in [0, 1], got {:?}", c.restitution),
                 );
             }
         }
         for (i, a) in self.attachments.iter().enumerate() {
             let at = format!("attachments[{i}]");
+            if let Some(j) = self.attachments[..i]
+                .iter()
+                .position(|o| o.particle == a.particle)
+            {
+                is.push(
+                    format!("{at}.particle"),
+                    format!(
+                        "{:?} is already attached by attachments[{j}]; a particle follows one body",
+                        a.particle
+                    ),
+                );
+            }
             if a.body >= self.bodies.len() {
                 is.push(
                     format!("{at}.body"),

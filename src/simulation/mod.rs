@@ -41,8 +41,11 @@ use quarantine::contain;
 pub struct Diagnostics {
     /// Kinetic + spring + gravitational energy (J).
     pub energy: f64,
-    /// Largest `|δ|/l0`.
+    /// The cloth's stretch: the largest extension `δ/l0` of any spring (its tension).
     pub max_strain: f64,
+    /// The largest compression `−δ/l0` of any spring (folds and bending), apart from the
+    /// stretch.
+    pub max_compression: f64,
     /// `h/h_c` of the stiffest spring (`h_c = π/ω0`).
     pub step_ratio: f64,
     /// Particles whose position or velocity is not finite: 0 after every step, which
@@ -50,6 +53,8 @@ pub struct Diagnostics {
     pub non_finite: usize,
     /// Particles in quarantine ([`Simulation::quarantined`]).
     pub quarantined: usize,
+    /// The first frame of the run whose state was finite but wrong (see [`crate::Failure`]).
+    pub failure: Option<crate::Failure>,
 }
 
 /// A mass-spring simulation over a hecs World.
@@ -95,6 +100,8 @@ pub struct Simulation {
     contained: Vec<usize>,
     /// Particles quarantined since the last frame's statistics.
     newly_quarantined: usize,
+    /// The run's first [`crate::Failure`].
+    failure: Option<crate::Failure>,
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -182,6 +189,7 @@ impl Simulation {
             next_cloth: 0,
             contained: Vec::new(),
             newly_quarantined: 0,
+            failure: None,
             choice: None,
             parallel: false,
             steps: 0,
@@ -364,9 +372,12 @@ impl Simulation {
 
     /// Live figures of the current state: energy, strain, step ratio, non-finite count.
     pub fn diagnostics(&self) -> Diagnostics {
+        let stretch = metrics::stretch(&self.packed);
         Diagnostics {
             energy: metrics::energy(&self.packed, self.config.gravity),
-            max_strain: metrics::max_strain(&self.packed),
+            max_strain: stretch.tension,
+            max_compression: stretch.compression,
+            failure: self.failure,
             step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
                 .map_or(0.0, |r| r.0),
             non_finite: metrics::non_finite_count(&self.packed),

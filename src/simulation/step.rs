@@ -110,11 +110,15 @@ impl Simulation {
                     }
                 }
             }
-            return self.finish_frame(t0, t1, gathered, contacts);
+            return self.finish_frame(t0, t1, gathered, contacts, None);
         }
         let (solver, packed) = (&mut self.solver, &mut self.packed);
         let (world, found) = (&self.world, &mut self.contained);
         let contacts_time = &mut contacts;
+        // The strain check reads the frame's end state inside the same rayon job.
+        let check = self.config.strain_limit.is_finite();
+        let mut tension = None;
+        let tension_out = &mut tension;
         let mut integrate = move || {
             (1..=substeps).try_for_each(|k| {
                 match coupling.as_mut() {
@@ -135,7 +139,11 @@ impl Simulation {
                     }
                 }
                 Ok::<(), SimError>(())
-            })
+            })?;
+            if check {
+                *tension_out = Some(crate::metrics::stretch(packed).tension);
+            }
+            Ok::<(), SimError>(())
         };
         if self.parallel {
             // One rayon job per frame: the passes inside run from a worker's own deque, so
@@ -144,17 +152,19 @@ impl Simulation {
         } else {
             integrate()?;
         }
-        self.finish_frame(t0, t1, gathered, contacts)
+        self.finish_frame(t0, t1, gathered, contacts, tension)
     }
 
     /// The end of a frame: the quarantine (the state is finite: every substep ended with
-    /// [`contain`]), then the scatter.
+    /// [`contain`]), then the scatter and the strain check (`tension`: the end state's, when
+    /// the integrate stage measured it).
     pub(super) fn finish_frame(
         &mut self,
         t0: Instant,
         t1: Instant,
         gathered: bool,
         contacts: Duration,
+        tension: Option<f64>,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.quarantine();
@@ -162,6 +172,8 @@ impl Simulation {
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
         self.packed.scatter(&mut self.world);
+        let failure = self.check_strain(tension);
+        self.failure = self.failure.or(failure);
         let t3 = Instant::now();
         self.stats = StepStats {
             gather: t1 - t0,
@@ -171,8 +183,38 @@ impl Simulation {
             gathered,
             substeps: self.config.substeps,
             quarantined,
+            failure,
         };
         Ok(&self.stats)
+    }
+
+    /// The strain limit, checked on the frame's end state: one read of the springs, and the
+    /// worst spring looked up only when the limit is passed.
+    fn check_strain(&self, tension: Option<f64>) -> Option<crate::Failure> {
+        let limit = self.config.strain_limit;
+        if !limit.is_finite() {
+            return None;
+        }
+        let tension = tension.unwrap_or_else(|| crate::metrics::stretch(&self.packed).tension);
+        if tension <= limit {
+            return None;
+        }
+        let (spring, strain) = crate::metrics::most_stretched(&self.packed)?;
+        let h = self.config.h();
+        let step_ratio = self
+            .packed
+            .all_springs()
+            .nth(spring)
+            .map_or(0.0, |s| s.step_ratio(h));
+        Some(crate::Failure::Strain {
+            frame: self.steps,
+            spring,
+            strain,
+            limit,
+            integrator: self.config.integrator,
+            step_ratio,
+            substeps: self.config.substeps,
+        })
     }
 
     /// What the step needs packed: cloth grids kept whole for an integrator with a grid pass

@@ -121,6 +121,7 @@ fn main() -> ExitCode {
                 None => Ok(()),
             }
         }
+        Command::Bench { repeats: 0, .. } => Err("--repeats 0: run at least once".into()),
         Command::Bench {
             quick,
             repeats,
@@ -160,12 +161,14 @@ fn main() -> ExitCode {
             substeps,
             repeats,
             integrators,
-        } => parse_integrators(&integrators).map(|list| {
-            print!(
-                "{}",
-                throughput::report(size, cloths, substeps, repeats, &list)
-            );
-        }),
+        } => check_throughput(size, cloths, substeps, repeats)
+            .and_then(|()| parse_integrators(&integrators))
+            .map(|list| {
+                print!(
+                    "{}",
+                    throughput::report(size, cloths, substeps, repeats, &list)
+                );
+            }),
         Command::DrapePeer { scene } => drape_peer(&scene),
     };
     match result {
@@ -175,6 +178,31 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+/// The throughput flags, refused before anything is built: a cloth of at least 2×2, at most
+/// the engine's default particle limit in all, and at least one substep and one repeat.
+fn check_throughput(size: u32, cloths: u32, substeps: u32, repeats: u32) -> Result<(), String> {
+    let max = harmonic::scene::Limits::DEFAULT.max_particles;
+    let particles = u64::from(size) * u64::from(size) * u64::from(cloths);
+    if size < 2 {
+        return Err(format!(
+            "--size {size}: a cloth needs at least 2×2 particles"
+        ));
+    }
+    if cloths == 0 || particles > max {
+        return Err(format!(
+            "--size {size} --cloths {cloths}: {particles} particles; expected 1 to {max} \
+             (the engine's default particle limit)"
+        ));
+    }
+    if substeps == 0 {
+        return Err("--substeps 0: time at least one substep".into());
+    }
+    if repeats == 0 {
+        return Err("--repeats 0: run at least once".into());
+    }
+    Ok(())
 }
 
 #[cfg(feature = "gpu")]

@@ -73,3 +73,26 @@ fn bench_runs_only_what_is_selected() {
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown integrator `leapfrog`"));
 }
+
+#[test]
+fn throughput_refuses_cloths_it_cannot_time() {
+    for (args, needle) in [
+        (&["--size", "0"][..], "--size 0"),
+        (&["--size", "1"][..], "--size 1"),
+        (
+            &["--size", "100000"][..],
+            "the engine's default particle limit",
+        ),
+        (&["--size", "2048", "--cloths", "2"][..], "--cloths 2"),
+        (&["--repeats", "0"][..], "--repeats 0"),
+        (&["--substeps", "0"][..], "--substeps 0"),
+    ] {
+        let out = harmonic_lab(&[&["throughput"][..], args].concat());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+    let out = harmonic_lab(&["bench", "--repeats", "0"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--repeats 0"));
+}

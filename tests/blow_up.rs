@@ -1,0 +1,129 @@
+//! A run that blows up while staying finite is a failure, not a success: the strain limit
+//! reports it as a typed value in `StepStats` and `Diagnostics`, and `harmonic run` exits 2
+//! naming the frame, the integrator and h/h_c.
+
+use std::process::Command;
+
+use harmonic::prelude::*;
+use harmonic::Failure;
+
+/// A three-particle chain far too stiff for its step: k = 1e6 N/m, dt = 0.1 s, one substep.
+fn stiff_chain(integrator: &str) -> String {
+    format!(
+        r#"Scene(dt: 0.1, substeps: 1, integrator: "{integrator}", seconds: 2.0,
+            ropes: [(start: (0.0, 0.0, 0.0), end: (1.0, 0.0, 0.0), particles: 3, mass: 0.3,
+                     spring: (stiffness: 1e6))])"#
+    )
+}
+
+#[test]
+fn a_blow_up_is_reported_at_its_frame() {
+    let scene = Scene::parse(&stiff_chain("explicit-euler"), "stiff.ron").unwrap();
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let mut first = None;
+    for frame in 1..=20u64 {
+        let stats = *sim.step().unwrap();
+        if let (None, Some(f)) = (first, stats.failure) {
+            first = Some((frame, f));
+        }
+    }
+    let (frame, failure) = first.expect("the chain blows up within 20 frames");
+    let Failure::Strain {
+        frame: at,
+        strain,
+        limit,
+        integrator,
+        step_ratio,
+        ..
+    } = failure
+    else {
+        panic!("{failure:?}")
+    };
+    assert_eq!(at, frame);
+    assert!(strain > limit && limit == harmonic::SimConfig::default().strain_limit);
+    assert_eq!(integrator, Integrator::ExplicitEuler);
+    // ω0 = √(k/μ) = √(1e6/0.05) ≈ 4472 rad/s, h_c = π/ω0 ≈ 7e-4 s: h = 0.1 s is ~142 h_c.
+    assert!(
+        (step_ratio - 0.1 * (1e6f64 / 0.05).sqrt() / std::f64::consts::PI).abs()
+            < 1e-6 * step_ratio
+    );
+    // Diagnostics keeps the first failure.
+    assert_eq!(sim.diagnostics().failure, Some(failure));
+    // The same chain stepped safely fails nowhere.
+    let mut safe = Scene::parse(&stiff_chain("explicit-euler"), "stiff.ron").unwrap();
+    safe.substeps = None;
+    safe.dt = 0.001;
+    let mut sim = Simulation::from_scene(&safe).unwrap();
+    for _ in 0..100 {
+        assert_eq!(sim.step().unwrap().failure, None);
+    }
+    assert_eq!(sim.diagnostics().failure, None);
+}
+
+#[test]
+fn the_limit_is_configurable_and_can_be_turned_off() {
+    let mut scene = Scene::parse(&stiff_chain("explicit-euler"), "stiff.ron").unwrap();
+    scene.strain_limit = Some(f64::INFINITY);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..5 {
+        assert_eq!(sim.step().unwrap().failure, None);
+    }
+    let bad =
+        stiff_chain("explicit-euler").replace("seconds: 2.0,", "seconds: 2.0, strain_limit: 0.0,");
+    assert!(Scene::parse(&bad, "bad.ron").is_err());
+    let config = SimConfig {
+        strain_limit: f64::NAN,
+        ..SimConfig::default()
+    };
+    assert!(Simulation::new(hecs::World::new(), config).is_err());
+}
+
+#[test]
+fn stretch_is_tension_and_compression_is_apart() {
+    // Two particles 1 m apart on a 2 m spring: compressed by half, not stretched at all.
+    let text = r#"Scene(dt: 0.01, gravity: (0.0, 0.0, 0.0),
+        particles: [(position: (0.0, 0.0, 0.0), mass: 1.0), (position: (1.0, 0.0, 0.0), mass: 1.0)],
+        springs: [(a: 0, b: 1, stiffness: 1.0, rest_length: 2.0)])"#;
+    let sim = Simulation::from_scene(&Scene::parse(text, "c.ron").unwrap()).unwrap();
+    let d = sim.diagnostics();
+    assert_eq!((d.max_strain, d.max_compression), (0.0, 0.5));
+}
+
+#[test]
+fn harmonic_run_exits_2_on_a_blow_up() {
+    let dir = std::env::temp_dir().join(format!("harmonic-blow-up-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let chain = dir.join("stiff_chain.ron");
+    std::fs::write(&chain, stiff_chain("explicit-euler")).unwrap();
+    // A 16×16 cloth with k = 1e5 N/m at dt = 0.05 s on one substep of the closed form.
+    let cloth = dir.join("stiff_cloth.ron");
+    std::fs::write(
+        &cloth,
+        r#"Scene(dt: 0.05, substeps: 1, integrator: "harmonic", seconds: 2.0,
+            cloths: [(origin: (-0.5, 1.0, 0.0), size: (1.0, 1.0), resolution: (16, 16),
+                      plane: Vertical, mass: 1.0, structural: (stiffness: 1e5),
+                      shear: Some((stiffness: 1e5)), pins: [TopLeft, TopRight])])"#,
+    )
+    .unwrap();
+    for (path, integrator) in [(&chain, "explicit-euler"), (&cloth, "harmonic")] {
+        let out = Command::new(env!("CARGO_BIN_EXE_harmonic"))
+            .args(["run", path.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {stderr}", path.display());
+        for needle in [
+            "run failed at frame",
+            "strain limit",
+            integrator,
+            "h/h_c",
+            "lower dt",
+        ] {
+            assert!(
+                stderr.contains(needle),
+                "{}: lacks {needle:?}: {stderr}",
+                path.display()
+            );
+        }
+    }
+}
