@@ -468,7 +468,12 @@ fn run(args: RunArgs) -> Result<(), String> {
     );
     if let Some(c) = sim.step_choice() {
         let limit = c.limit.map_or("no stability limit".to_string(), |l| {
-            format!("ω_max h ≤ {l:.3}")
+            let why = if config.integrator == harmonic::Integrator::Xpbd {
+                " (an accuracy bound: xpbd has no stability limit)"
+            } else {
+                ""
+            };
+            format!("ω_max h ≤ {l:.3}{why}")
         });
         println!(
             "substeps: automatic, {} ({limit} for ζ in [{:.3}, {:.3}], ω_max = {:.4e} rad/s){}",
