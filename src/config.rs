@@ -208,10 +208,11 @@ pub struct SimConfig {
     /// Frame step (s).
     pub dt: f64,
     /// Substeps per frame; the integrator's step is `h = dt / substeps`. With
-    /// `auto_substeps` this is chosen at every gather and on [`Simulation::set_config`].
+    /// `auto_substeps` this is chosen at every gather, pin refresh and
+    /// [`crate::Simulation::set_config`].
     pub substeps: u32,
     /// Choose `substeps` from the network's highest frequency and the integrator's measured
-    /// stability region ([`crate::step_control`]).
+    /// stability region (the engine's step control; `step_control.rs`).
     pub auto_substeps: bool,
     /// Gravitational acceleration (m/s²).
     pub gravity: DVec3,

@@ -2,7 +2,7 @@
 //!
 //! Mass-spring simulation (cloth, ropes, soft props) whose springs are integrated in closed
 //! form as damped harmonic oscillators over each step: explicit and parallel like Euler, but
-//! exact for an isolated spring in every damping regime. See [`integrate`] for the math and
+//! exact for an isolated spring in every damping regime. See [`math`] for the math and
 //! how it departs from the paper it comes from.
 //!
 //! Particles, springs and pins are hecs components; a [`Simulation`] owns the World, packs

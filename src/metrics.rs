@@ -34,9 +34,9 @@ pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
     }
 }
 
-/// How far the cloth is stretched: the largest extension `δ/l0` of any spring (its tension),
-/// and apart the largest compression `−δ/l0` (a fold or a bend shortens springs without
-/// stretching the cloth). NaN where any spring's is.
+/// How far the cloth is stretched: the largest extension `δ/l0` of any spring with a free end
+/// (its tension), and apart the largest compression `−δ/l0` (a fold or a bend shortens springs
+/// without stretching the cloth). NaN where any spring's is.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Stretch {
     pub tension: f64,
@@ -45,7 +45,11 @@ pub struct Stretch {
 
 /// [`Stretch`] of the packed state.
 pub fn stretch(packed: &Packed) -> Stretch {
+    // A spring between two pinned particles is the game's length, not the cloth's stretch.
     let one = |s: PackedSpring| {
+        if !s.mu.is_finite() {
+            return Stretch::default();
+        }
         let e = packed.stretch(&s) / s.rest;
         Stretch {
             tension: if e.is_nan() { e } else { e.max(0.0) },
@@ -68,6 +72,9 @@ pub fn stretch(packed: &Packed) -> Stretch {
 pub fn most_stretched(packed: &Packed) -> Option<(usize, f64)> {
     let mut best: Option<(usize, f64)> = None;
     for (k, s) in packed.all_springs().enumerate() {
+        if !s.mu.is_finite() {
+            continue;
+        }
         let e = packed.stretch(&s) / s.rest;
         if best.is_none_or(|(_, b)| e > b || (e.is_nan() && !b.is_nan())) {
             best = Some((k, e));

@@ -30,7 +30,8 @@ pub struct StepStats {
 #[non_exhaustive]
 pub enum Failure {
     /// A spring stretched past [`crate::SimConfig::strain_limit`]: the step is too large for
-    /// the springs (the state is blowing up), or the scene stretches further than its limit.
+    /// the springs (the state is blowing up), or the scene (or a particle grabbed and dragged
+    /// away) stretches it further than the limit.
     Strain {
         /// The frame (1 for the first step).
         frame: u64,
@@ -65,8 +66,8 @@ impl std::fmt::Display for Failure {
                 "frame {frame}: spring {spring} is stretched {:.4e} % past its rest length, beyond \
                  the strain limit of {:.4e} % ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} \
                  for that spring). A blow-up: lower dt, raise the substeps or leave them automatic, \
-                 or choose a more stable integrator; if the scene means to stretch this far, raise \
-                 `strain_limit`",
+                 or choose a more stable integrator; if the scene (or a drag) means to stretch this \
+                 far, raise `strain_limit`",
                 100.0 * strain,
                 100.0 * limit
             ),

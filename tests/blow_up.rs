@@ -176,3 +176,23 @@ fn a_blow_up_on_the_gpu_is_reported_too() {
         "{failed:?}"
     );
 }
+
+#[test]
+fn a_spring_between_two_pins_is_not_the_cloths_stretch() {
+    // Pinned 20 m apart on a 1 m spring: the game's doing, not a blow-up.
+    let text = r#"Scene(dt: 0.01,
+        particles: [(position: (0.0, 0.0, 0.0), mass: 1.0, pinned: true),
+                    (position: (20.0, 0.0, 0.0), mass: 1.0, pinned: true),
+                    (position: (20.0, -1.0, 0.0), mass: 1.0)],
+        springs: [(a: 0, b: 1, stiffness: 10.0, rest_length: 1.0), (a: 1, b: 2, stiffness: 10.0)])"#;
+    let mut sim = Simulation::from_scene(&Scene::parse(text, "pins.ron").unwrap()).unwrap();
+    for _ in 0..10 {
+        assert_eq!(sim.step().unwrap().failure, None);
+    }
+    assert!(sim.diagnostics().max_strain < 1.0);
+    assert!(harmonic::scene::Limits::DEFAULT
+        .frames(1.0, f64::NAN)
+        .is_err());
+    assert!(harmonic::scene::Limits::DEFAULT.frames(1.0, -1.0).is_err());
+    assert_eq!(harmonic::scene::Limits::DEFAULT.frames(1.0, 0.01), Ok(100));
+}

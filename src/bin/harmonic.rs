@@ -89,7 +89,7 @@ fn frames(
     };
     limits
         .frames(seconds, dt)
-        .map_err(|e| format!("{what}: {e}"))
+        .map_err(|e| format!("{what}: {}", e.message))
 }
 
 /// Progress on stderr: a bar on a terminal, else a plain line at every tenth of the run.
@@ -260,13 +260,8 @@ fn render(args: RenderArgs) -> Result<(), String> {
         ));
     }
     let limits = args.limits.limits();
-    // The run's length is checked below, where --steps and --seconds override the scene's.
-    let load = Limits {
-        max_frames: u64::MAX,
-        ..limits
-    };
-    let scene = Scene::load_with(&args.scene, &load).map_err(|e| e.to_string())?;
-    let mut sim = Simulation::from_scene_with(&scene, &load).map_err(|e| e.to_string())?;
+    let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
+    let mut sim = Simulation::from_scene_with(&scene, &limits).map_err(|e| e.to_string())?;
     let dt = sim.config().dt;
     let steps = frames(None, args.seconds, scene.seconds, dt, &limits)?;
     let seconds = steps as f64 * dt;
@@ -396,12 +391,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             ));
         }
     }
-    // The run's length is checked below, where --steps and --seconds override the scene's.
-    let load = Limits {
-        max_frames: u64::MAX,
-        ..limits
-    };
-    let scene = Scene::load_with(&args.scene, &load).map_err(|e| e.to_string())?;
+    let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
     let built = scene.build();
     let mut config = built.config;
     if let Some(dt) = args.dt {
@@ -482,7 +472,11 @@ fn run(args: RunArgs) -> Result<(), String> {
             c.zeta_range.1,
             c.omega_max,
             if c.capped {
-                " — capped: the scene needs more, expect instability"
+                if config.integrator == harmonic::Integrator::Xpbd {
+                    " — capped: the scene needs more, expect inaccuracy"
+                } else {
+                    " — capped: the scene needs more, expect instability"
+                }
             } else {
                 ""
             }
@@ -543,9 +537,6 @@ fn run(args: RunArgs) -> Result<(), String> {
             }
             Ok(_) => {}
         }
-        if sim.stats().failure.is_some() {
-            break;
-        }
         bar.set(step, sim.time());
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
@@ -561,6 +552,9 @@ fn run(args: RunArgs) -> Result<(), String> {
             if step % args.every == 0 {
                 write_rows(w, &sim, step).map_err(|e| e.to_string())?;
             }
+        }
+        if sim.stats().failure.is_some() {
+            break;
         }
     }
     let wall = t0.elapsed().as_secs_f64();

@@ -1,7 +1,8 @@
 //! Gather and scatter: the World packed into structure-of-arrays buffers.
 //!
-//! Topology (springs, CSR incidence, masses) is packed once per topology change; between
-//! gathers the buffers are the state and the World is only written back at scatter.
+//! The topology ([`Topology`]) is packed once per topology change; a pin set or freed
+//! refreshes the mass split ([`Packed::repin`]); between them the buffers are the state and
+//! the World is only written back at scatter.
 
 // Not API: reachable from outside only through the hidden `internals` module.
 #![allow(missing_docs)]
@@ -168,11 +169,11 @@ impl Colouring {
     }
 }
 
-/// A cloth's springs in packed form ([`ClothSprings`] with its particles located): the
+/// A cloth's springs in packed form ([`crate::ClothSprings`] with its particles located): the
 /// particle at grid `(c, r)` is packed index `base + r·cols + c`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PackedGrid {
-    /// The entity holding the [`ClothSprings`].
+    /// The entity holding the [`crate::ClothSprings`].
     pub entity: Entity,
     pub base: u32,
     pub cols: u32,
@@ -295,7 +296,7 @@ pub struct Packed {
     pub v: Vec<DVec3>,
     /// 0 for pinned particles.
     pub inv_mass: Vec<f64>,
-    /// Springs one by one: the World's [`Spring`]s, then the cloths' unless kept as grids.
+    /// Springs one by one: the World's [`crate::Spring`]s, then the cloths' unless kept as grids.
     /// `a`, `b`, `rest`, `stiffness`, `damping` are topology; `mu`, `wa`, `wb` the mass split.
     pub springs: Vec<PackedSpring>,
     /// Incidence of `springs` (empty without springs); pinned ends have no entry.

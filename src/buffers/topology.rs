@@ -96,9 +96,10 @@ impl Packed {
                 return Err(SimError::NoParticle { index: i });
             }
             if let Some(m) = mass.filter(|m| !(m.is_finite() && *m > 0.0)) {
-                return Err(SimError::BadParticle {
-                    particle: self.topology.entities[i],
-                    what: format!("mass must be finite and > 0, got {m:?}"),
+                let what = format!("mass must be finite and > 0, got {m:?}");
+                return Err(match self.topology.entities.get(i) {
+                    Some(&particle) => SimError::BadParticle { particle, what },
+                    None => SimError::NoParticle { index: i },
                 });
             }
         }

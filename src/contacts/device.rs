@@ -35,8 +35,8 @@ impl Props {
             .collect()
     }
 
-    /// The colliders as they stand (after [`Self::step_bodies`]), in the CPU stage's order
-    /// and with its motions and friction ([`ContactStage::collect`]); the stage keeps them to
+    /// The colliders as they stand (after `step_bodies`), in the CPU stage's order
+    /// and with its motions and friction (`ContactStage::collect`); the stage keeps them to
     /// know which body each partial pushes.
     pub fn device_colliders(&mut self, out: &mut Vec<Collider>) {
         let (bodies, colliders) = (&self.physics.bodies, &self.physics.colliders);

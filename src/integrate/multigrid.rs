@@ -10,7 +10,7 @@
 //! (`m + 2 Σ|B_s|`): at small steps that is the mass, so the cycle is exact as h → 0 (a fixed
 //! Jacobi weight of 1/2 is not, and stalls at a constant error), and at large steps it is half
 //! the diagonal, the weight the prototype measured stable. The finest level is the current Jacobian,
-//! matrix-free ([`implicit::product`]). The coarse levels are fixed for a given `h`: Galerkin
+//! matrix-free (`implicit::product`). The coarse levels are fixed for a given `h`: Galerkin
 //! products of an isotropic operator (each spring's full stiffness in every direction, one
 //! scalar network applied to each axis, so it needs no update as the cloth turns; less than
 //! the full stiffness over-corrects and blows up) through smoothed-aggregation transfers built

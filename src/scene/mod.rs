@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::SceneError;
+use crate::error::{Issue, SceneError};
 
 pub use build::BuiltScene;
 
@@ -64,19 +64,29 @@ impl Limits {
         max_frames: 1_000_000,
     };
 
-    /// The frames a run of `seconds` at `dt` takes, or why it is refused: a time that is not
-    /// finite and > 0, or more frames than [`Self::max_frames`].
-    pub fn frames(&self, seconds: f64, dt: f64) -> Result<u64, String> {
+    /// The frames a run of `seconds` at `dt` takes, or why it is refused (an [`Issue`] at
+    /// `seconds`): a time that is not finite and > 0, or more frames than
+    /// [`Self::max_frames`].
+    pub fn frames(&self, seconds: f64, dt: f64) -> Result<u64, Issue> {
+        let issue = |message: String| Issue {
+            location: "seconds".into(),
+            message,
+        };
         if !(seconds.is_finite() && seconds > 0.0) {
-            return Err(format!("must be finite and > 0, got {seconds:?}"));
+            return Err(issue(format!("must be finite and > 0, got {seconds:?}")));
+        }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(issue(format!(
+                "needs a frame step dt finite and > 0, got {dt:?}"
+            )));
         }
         let frames = (seconds / dt).round().max(1.0);
         if frames.is_nan() || frames > self.max_frames as f64 {
-            return Err(format!(
+            return Err(issue(format!(
                 "{seconds:?} s at dt {dt:?} s is {frames:?} frames; the limit is {} \
                  (Limits::max_frames, --max-frames)",
                 self.max_frames
-            ));
+            )));
         }
         Ok(frames as u64)
     }

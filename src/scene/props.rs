@@ -169,7 +169,7 @@ fn default_kinetic() -> f64 {
 }
 
 /// A particle of the scene.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Hash)]
 pub enum ParticleRef {
     /// Index into `particles`.
     Particle(usize),

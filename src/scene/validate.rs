@@ -51,7 +51,8 @@ impl Issues {
     fn spec_between(&mut self, at: &str, s: &SpringSpec, m_a: f64, m_b: f64) {
         let before = self.0.len();
         self.spec(at, s);
-        if self.0.len() > before || !(m_a > 0.0 && m_b > 0.0) {
+        let mass_ok = |m: f64| m.is_finite() && m > 0.0;
+        if self.0.len() > before || !(mass_ok(m_a) && mass_ok(m_b)) {
             return;
         }
         let (k, c) = s.resolve(m_a, m_b);
@@ -134,11 +135,9 @@ impl Scene {
             }
         }
         if let Some(t) = self.seconds {
-            let dt_ok = self.dt.is_finite() && self.dt > 0.0;
-            match limits.frames(t, self.dt) {
-                Err(e) if dt_ok || !(t.is_finite() && t > 0.0) => is.push("seconds", e),
-                _ => {}
-            }
+            // How many frames that is, is checked where a run takes its length from it
+            // (`Limits::frames`, `harmonic run`): a scene stepped by a game has no end.
+            is.positive("seconds", t);
         }
         for (i, p) in self.particles.iter().enumerate() {
             is.finite(format!("particles[{i}].position"), p.position);
@@ -375,15 +374,13 @@ impl Scene {
                     // rapier gives a dynamic body the mass of its shape's volume; with none,
                     // mass 0, it would silently behave as fixed.
                     Ok(co) if b.kind == super::props::BodyKind::Dynamic && b.mass.is_none() => {
-                        let density = b.density.unwrap_or(1000.0);
-                        let mass = co.density(density as f32).build().mass();
-                        if !(mass.is_finite() && mass > 0.0) {
+                        // The shape's volume: its mass at density 1.
+                        let volume = co.density(1.0).build().mass();
+                        if !(volume.is_finite() && volume > 0.0) {
                             is.push(
                                 &sh,
-                                format!(
-                                    "encloses no volume, so a dynamic body gets mass {mass:?} from its \
-                                     density; give the body a `mass`, or a shape with volume"
-                                ),
+                                "encloses no volume, so a dynamic body would get mass 0 from its \
+                                 density; give the body a `mass`, or a shape with volume",
                             );
                         }
                     }
@@ -411,12 +408,14 @@ impl Scene {
                 );
             }
         }
+        // Each particle's first attachment.
+        let mut attached = std::collections::HashMap::new();
+        for (i, a) in self.attachments.iter().enumerate() {
+            attached.entry(a.particle).or_insert(i);
+        }
         for (i, a) in self.attachments.iter().enumerate() {
             let at = format!("attachments[{i}]");
-            if let Some(j) = self.attachments[..i]
-                .iter()
-                .position(|o| o.particle == a.particle)
-            {
+            if let Some(&j) = attached.get(&a.particle).filter(|&&j| j != i) {
                 is.push(
                     format!("{at}.particle"),
                     format!(

@@ -246,9 +246,15 @@ impl Simulation {
         if !self.pins.is_empty() {
             // A freed particle takes its mass from the World, which holds it.
             let (world, entities) = (&self.world, &self.packed.topology.entities);
-            let pins: Vec<(usize, Option<f64>)> = self
-                .pins
-                .drain(..)
+            // The last edit of each particle is what the World holds.
+            let mut edits: Vec<(usize, usize, bool)> = (self.pins.drain(..).enumerate())
+                .map(|(k, (i, pinned))| (i, k, pinned))
+                .collect();
+            edits.sort_unstable_by_key(|&(i, k, _)| (i, k));
+            let last = (0..edits.len())
+                .filter(|&k| edits.get(k + 1).is_none_or(|next| next.0 != edits[k].0))
+                .map(|k| (edits[k].0, edits[k].2));
+            let pins: Vec<(usize, Option<f64>)> = last
                 .map(|(i, pinned)| {
                     let mass = || {
                         let p = entities.get(i).map(|&e| world.get::<&crate::Particle>(e));
@@ -263,7 +269,8 @@ impl Simulation {
                 return Err(e);
             }
             self.state_edited = false;
-            return self.refresh();
+            // As after a failed gather: the next step starts again from the World.
+            return self.refresh().inspect_err(|_| self.dirty = true);
         }
         #[cfg(feature = "gpu")]
         if self.state_edited {

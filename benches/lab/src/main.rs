@@ -184,7 +184,10 @@ fn main() -> ExitCode {
 /// the engine's default particle limit in all, and at least one substep and one repeat.
 fn check_throughput(size: u32, cloths: u32, substeps: u32, repeats: u32) -> Result<(), String> {
     let max = harmonic::scene::Limits::DEFAULT.max_particles;
-    let particles = u64::from(size) * u64::from(size) * u64::from(cloths);
+    let particles = u64::from(size)
+        .checked_mul(u64::from(size))
+        .and_then(|p| p.checked_mul(u64::from(cloths)))
+        .unwrap_or(u64::MAX);
     if size < 2 {
         return Err(format!(
             "--size {size}: a cloth needs at least 2×2 particles"
