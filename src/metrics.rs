@@ -43,44 +43,132 @@ pub struct Stretch {
     pub compression: f64,
 }
 
+/// A reduction over every spring as `(a, b, rest, stiffness)`: the loose springs, then each
+/// cloth grid walked link by link (the set `PackedGrid::springs` expands, without building
+/// each spring's mass split). In parallel for large scenes; `join` must be associative and
+/// commutative, so the result does not depend on the split.
+fn reduce_springs<R: Copy + Send + Sync>(
+    packed: &Packed,
+    identity: R,
+    one: impl Fn(usize, usize, f64, f64) -> R + Sync + Send,
+    join: impl Fn(R, R) -> R + Sync + Send,
+) -> R {
+    let row = |g: &crate::buffers::PackedGrid, r: u32| {
+        let (cols, rows) = (g.cols, g.rows);
+        let at = |c: u32, r: u32| (g.base + r * cols + c) as usize;
+        let mut acc = identity;
+        for l in &g.links {
+            let (dc, dr) = l.offset;
+            let (adc, adr) = (dc.unsigned_abs(), dr.unsigned_abs());
+            if adc >= cols || r + adr >= rows {
+                continue;
+            }
+            let (ca, ra) = ((-dc).max(0) as u32, r + (-dr).max(0) as u32);
+            let (cb, rb) = (dc.max(0) as u32, r + dr.max(0) as u32);
+            for col in 0..cols - adc {
+                let (a, b) = (at(col + ca, ra), at(col + cb, rb));
+                acc = join(acc, one(a, b, l.rest_length, l.stiffness));
+            }
+        }
+        acc
+    };
+    let loose = |s: &PackedSpring| one(s.a as usize, s.b as usize, s.rest, s.stiffness);
+    let grids = &packed.topology.grids;
+    if packed.spring_count() < PAR_MIN {
+        let cloth = grids
+            .iter()
+            .flat_map(|g| (0..g.rows).map(move |r| row(g, r)));
+        packed
+            .springs
+            .iter()
+            .map(loose)
+            .chain(cloth)
+            .fold(identity, &join)
+    } else {
+        let cloth = grids
+            .par_iter()
+            .flat_map(|g| (0..g.rows).into_par_iter().map(move |r| row(g, r)));
+        let springs = packed.springs.par_iter().map(loose);
+        springs.chain(cloth).reduce(|| identity, &join)
+    }
+}
+
+/// `δ/l0` of the spring from `a` to `b`, or None between two pinned particles (the game's
+/// length, not the cloth's stretch).
+#[inline(always)]
+fn extension(packed: &Packed, a: usize, b: usize, rest: f64) -> Option<f64> {
+    let free = packed.inv_mass[a] != 0.0 || packed.inv_mass[b] != 0.0;
+    free.then(|| ((packed.x[b] - packed.x[a]).length() - rest) / rest)
+}
+
 /// [`Stretch`] of the packed state.
 pub fn stretch(packed: &Packed) -> Stretch {
-    // A spring between two pinned particles is the game's length, not the cloth's stretch.
-    let one = |s: PackedSpring| {
-        if !s.mu.is_finite() {
-            return Stretch::default();
-        }
-        let e = packed.stretch(&s) / s.rest;
-        Stretch {
-            tension: if e.is_nan() { e } else { e.max(0.0) },
-            compression: if e.is_nan() { e } else { (-e).max(0.0) },
-        }
+    let one = |a, b, rest, _| match extension(packed, a, b, rest) {
+        None => Stretch::default(),
+        Some(e) if e.is_nan() => Stretch {
+            tension: e,
+            compression: e,
+        },
+        Some(e) => Stretch {
+            tension: e.max(0.0),
+            compression: (-e).max(0.0),
+        },
     };
     let join = |a: Stretch, b: Stretch| Stretch {
         tension: nan_max(a.tension, b.tension),
         compression: nan_max(a.compression, b.compression),
     };
-    if packed.spring_count() < PAR_MIN {
-        packed.all_springs().map(one).fold(Stretch::default(), join)
-    } else {
-        packed.par_springs().map(one).reduce(Stretch::default, join)
-    }
+    reduce_springs(packed, Stretch::default(), one, join)
 }
 
-/// The spring stretched most: its index in [`Packed::all_springs`] order (the first among
-/// equals) and its `δ/l0`. Sequential: for reports, not for every frame.
-pub fn most_stretched(packed: &Packed) -> Option<(usize, f64)> {
-    let mut best: Option<(usize, f64)> = None;
-    for (k, s) in packed.all_springs().enumerate() {
-        if !s.mu.is_finite() {
-            continue;
-        }
-        let e = packed.stretch(&s) / s.rest;
-        if best.is_none_or(|(_, b)| e > b || (e.is_nan() && !b.is_nan())) {
-            best = Some((k, e));
-        }
-    }
-    best
+/// Whether any spring with a free end is stretched past `limit` (`δ/l0 > limit`) or has a
+/// non-finite length: the per-frame strain check. Squared lengths against `((1 + limit) l0)²`,
+/// so no root or division per spring; [`most_stretched`] names the spring after.
+pub fn beyond(packed: &Packed, limit: f64) -> bool {
+    let (x, inv) = (&packed.x[..], &packed.inv_mass[..]);
+    let k = (1.0 + limit) * (1.0 + limit);
+    let over = |a: usize, b: usize, rest: f64, _| {
+        let d2 = (x[b] - x[a]).length_squared();
+        (d2 > k * rest * rest || d2.is_nan()) && !(inv[a] == 0.0 && inv[b] == 0.0)
+    };
+    reduce_springs(packed, false, over, |p, q| p | q)
+}
+
+/// The spring stretched most, as in [`Stretch`]: its ends (packed indices), `δ/l0`, and `h/h_c`
+/// at step `h`. A NaN length counts as the most; among equals the smallest pair, so the answer
+/// is the same however the springs are split.
+pub fn most_stretched(packed: &Packed, h: f64) -> Option<MostStretched> {
+    let one = |a: usize, b: usize, rest: f64, stiffness: f64| {
+        let e = extension(packed, a, b, rest)?;
+        let mu = 1.0 / (packed.inv_mass[a] + packed.inv_mass[b]);
+        Some(MostStretched {
+            ends: (a, b),
+            strain: e,
+            step_ratio: h * (stiffness / mu).sqrt() / std::f64::consts::PI,
+        })
+    };
+    // A total order: NaN first, then larger strain, then the smaller pair.
+    let worse = |p: &MostStretched, q: &MostStretched| match (p.strain.is_nan(), q.strain.is_nan())
+    {
+        (true, false) => true,
+        (false, true) => false,
+        (true, true) => p.ends < q.ends,
+        (false, false) => p.strain > q.strain || (p.strain == q.strain && p.ends < q.ends),
+    };
+    let join = |p: Option<MostStretched>, q: Option<MostStretched>| match (p, q) {
+        (Some(p), Some(q)) => Some(if worse(&p, &q) { p } else { q }),
+        (p, None) => p,
+        (None, q) => q,
+    };
+    reduce_springs(packed, None, one, join)
+}
+
+/// What [`most_stretched`] finds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MostStretched {
+    pub ends: (usize, usize),
+    pub strain: f64,
+    pub step_ratio: f64,
 }
 
 /// The larger of two values, NaN if either is (a broken state cannot report a small one).

@@ -35,8 +35,8 @@ pub enum Failure {
     Strain {
         /// The frame (1 for the first step).
         frame: u64,
-        /// The spring stretched most (index in the simulation's spring order).
-        spring: usize,
+        /// The ends of the spring stretched most (particles in scene order).
+        particles: (usize, usize),
         /// Its extension `δ/l0`.
         strain: f64,
         /// The limit it passed.
@@ -55,7 +55,7 @@ impl std::fmt::Display for Failure {
         match *self {
             Failure::Strain {
                 frame,
-                spring,
+                particles: (a, b),
                 strain,
                 limit,
                 integrator,
@@ -63,7 +63,7 @@ impl std::fmt::Display for Failure {
                 substeps,
             } => write!(
                 f,
-                "frame {frame}: spring {spring} is stretched {:.4e} % past its rest length, beyond \
+                "frame {frame}: the spring from particle {a} to {b} is stretched {:.4e} % past its rest length, beyond \
                  the strain limit of {:.4e} % ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} \
                  for that spring). A blow-up: lower dt, raise the substeps or leave them automatic, \
                  or choose a more stable integrator; if the scene (or a drag) means to stretch this \

@@ -196,3 +196,72 @@ fn a_spring_between_two_pins_is_not_the_cloths_stretch() {
     assert!(harmonic::scene::Limits::DEFAULT.frames(1.0, -1.0).is_err());
     assert_eq!(harmonic::scene::Limits::DEFAULT.frames(1.0, 0.01), Ok(100));
 }
+
+#[test]
+fn the_strain_check_reads_every_spring_of_a_grid() {
+    use harmonic::internals::metrics::stretch;
+    // A stretched, folded cloth with a rope, kept as a grid (symplectic Euler) and expanded
+    // (harmonic-gs): the check's walk over the grid's links finds what the springs one by one
+    // give, large and parallel or small and serial.
+    for (n, integrator) in [
+        (6, "symplectic-euler"),
+        (6, "harmonic-gs"),
+        (80, "symplectic-euler"),
+    ] {
+        let text = format!(
+            r#"Scene(dt: 0.01, integrator: "{integrator}", substeps: 4,
+                cloths: [(origin: (-0.5, 1.0, 0.0), size: (1.0, 1.0), resolution: ({n}, {n}),
+                          plane: Vertical, mass: 0.2, structural: (frequency: 5.0),
+                          shear: Some((frequency: 5.0)), bend: Some((frequency: 2.0)),
+                          pins: [TopLeft, TopRight])],
+                ropes: [(start: (1.0, 1.0, 0.0), end: (1.0, 0.2, 0.0), particles: 6, mass: 0.1,
+                         spring: (frequency: 5.0))])"#
+        );
+        let mut sim = Simulation::from_scene(&Scene::parse(&text, "s.ron").unwrap()).unwrap();
+        for _ in 0..30 {
+            sim.step().unwrap();
+        }
+        let p = sim.packed();
+        let (mut t, mut c) = (0.0f64, 0.0f64);
+        for s in p.all_springs().filter(|s| s.mu.is_finite()) {
+            let e = p.stretch(&s) / s.rest;
+            t = t.max(e);
+            c = c.max(-e);
+        }
+        let got = stretch(p);
+        assert!(t > 0.0 && c > 0.0, "{integrator} {n}: {t} {c}");
+        assert_eq!((got.tension, got.compression), (t, c), "{integrator} {n}");
+        // The worst spring is one of those at that stretch, the smallest pair among them.
+        let worst = harmonic::internals::metrics::most_stretched(p, 0.0025).unwrap();
+        let at_max: Vec<(usize, usize)> = p
+            .all_springs()
+            .filter(|s| s.mu.is_finite() && p.stretch(s) / s.rest == t)
+            .map(|s| (s.a as usize, s.b as usize))
+            .collect();
+        assert_eq!(worst.strain, t, "{integrator} {n}");
+        assert_eq!(Some(&worst.ends), at_max.iter().min(), "{integrator} {n}");
+    }
+}
+
+#[test]
+fn the_per_frame_check_agrees_with_the_stretch() {
+    use harmonic::internals::metrics::{beyond, stretch};
+    // A cloth hanging under its own weight on soft springs, kept as a grid and expanded:
+    // `beyond` answers exactly whether the stretch passes the limit, on either side of it.
+    for integrator in ["symplectic-euler", "harmonic-gs"] {
+        let text = format!(
+            r#"Scene(dt: 0.01, integrator: "{integrator}", substeps: 8,
+                cloths: [(origin: (-0.5, 1.0, 0.0), size: (1.0, 1.0), resolution: (70, 70),
+                          plane: Vertical, mass: 0.2, structural: (frequency: 3.0),
+                          shear: Some((frequency: 3.0)), pins: [TopLeft, TopRight])])"#
+        );
+        let mut sim = Simulation::from_scene(&Scene::parse(&text, "s.ron").unwrap()).unwrap();
+        for _ in 0..40 {
+            sim.step().unwrap();
+        }
+        let t = stretch(sim.packed()).tension;
+        assert!(t > 0.01, "{integrator}: {t}");
+        assert!(beyond(sim.packed(), 0.99 * t), "{integrator}");
+        assert!(!beyond(sim.packed(), 1.01 * t), "{integrator}");
+    }
+}

@@ -117,8 +117,9 @@ impl Simulation {
         let contacts_time = &mut contacts;
         // The strain check reads the frame's end state inside the same rayon job.
         let check = self.config.strain_limit.is_finite();
-        let mut tension = None;
-        let tension_out = &mut tension;
+        let limit = self.config.strain_limit;
+        let mut beyond = None;
+        let beyond_out = &mut beyond;
         let mut integrate = move || {
             (1..=substeps).try_for_each(|k| {
                 match coupling.as_mut() {
@@ -141,7 +142,7 @@ impl Simulation {
                 Ok::<(), SimError>(())
             })?;
             if check {
-                *tension_out = Some(crate::metrics::stretch(packed).tension);
+                *beyond_out = Some(crate::metrics::beyond(packed, limit));
             }
             Ok::<(), SimError>(())
         };
@@ -152,19 +153,19 @@ impl Simulation {
         } else {
             integrate()?;
         }
-        self.finish_frame(t0, t1, gathered, contacts, tension)
+        self.finish_frame(t0, t1, gathered, contacts, beyond)
     }
 
     /// The end of a frame: the quarantine (the state is finite: every substep ended with
-    /// [`contain`]), then the scatter and the strain check (`tension`: the end state's, when
-    /// the integrate stage measured it).
+    /// [`contain`]), then the scatter and the strain check (`beyond`: its answer, when the
+    /// integrate stage already checked the end state).
     pub(super) fn finish_frame(
         &mut self,
         t0: Instant,
         t1: Instant,
         gathered: bool,
         contacts: Duration,
-        tension: Option<f64>,
+        beyond: Option<bool>,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.quarantine();
@@ -172,7 +173,7 @@ impl Simulation {
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
         self.packed.scatter(&mut self.world);
-        let failure = self.check_strain(tension);
+        let failure = self.check_strain(beyond);
         self.failure = self.failure.or(failure);
         let t3 = Instant::now();
         self.stats = StepStats {
@@ -190,29 +191,26 @@ impl Simulation {
 
     /// The strain limit, checked on the frame's end state: one read of the springs, and the
     /// worst spring looked up only when the limit is passed.
-    fn check_strain(&self, tension: Option<f64>) -> Option<crate::Failure> {
+    fn check_strain(&self, beyond: Option<bool>) -> Option<crate::Failure> {
         let limit = self.config.strain_limit;
         if !limit.is_finite() {
             return None;
         }
-        let tension = tension.unwrap_or_else(|| crate::metrics::stretch(&self.packed).tension);
-        if tension <= limit {
+        if !beyond.unwrap_or_else(|| crate::metrics::beyond(&self.packed, limit)) {
             return None;
         }
-        let (spring, strain) = crate::metrics::most_stretched(&self.packed)?;
-        let h = self.config.h();
-        let step_ratio = self
-            .packed
-            .all_springs()
-            .nth(spring)
-            .map_or(0.0, |s| s.step_ratio(h));
+        let worst = crate::metrics::most_stretched(&self.packed, self.config.h())?;
+        if worst.strain <= limit {
+            // Within rounding of the limit: the squared comparison and δ/l0 disagree there.
+            return None;
+        }
         Some(crate::Failure::Strain {
             frame: self.steps,
-            spring,
-            strain,
+            particles: worst.ends,
+            strain: worst.strain,
             limit,
             integrator: self.config.integrator,
-            step_ratio,
+            step_ratio: worst.step_ratio,
             substeps: self.config.substeps,
         })
     }

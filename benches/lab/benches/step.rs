@@ -26,6 +26,21 @@ fn substep(c: &mut Criterion) {
             b.iter(|| solver.substep(&mut p, scene.dt).unwrap())
         });
     }
+    // The per-frame strain check beside them, on the grid form the default integrator steps.
+    let grid = harmonic::internals::buffers::Packed::gather_with(
+        &scene.build().world,
+        harmonic::internals::buffers::GatherOptions {
+            keep_grids: true,
+            colouring: false,
+        },
+    )
+    .unwrap();
+    group.bench_function("strain check (one per frame)", |b| {
+        b.iter(|| harmonic::internals::metrics::beyond(&grid, 10.0))
+    });
+    group.bench_function("stretch (Diagnostics)", |b| {
+        b.iter(|| harmonic::internals::metrics::stretch(&grid))
+    });
     group.finish();
 }
 
@@ -34,7 +49,10 @@ fn edits(c: &mut Criterion) {
     let scene = harmonic::internals::hanging_cloth(128);
     let mut group = c.benchmark_group("frame/cloth128");
     group.sample_size(10);
-    let at = |f: u64| DVec3::new(0.2 * (f as f64 * 0.05).sin(), 1.0, 0.1);
+    // A drag of a few millimetres about the particle's start, as a hand moves it per frame.
+    let x0 = Simulation::from_scene(&scene).unwrap().positions()[8000];
+    let at =
+        |f: u64| x0 + 0.005 * DVec3::new((f as f64 * 0.05).sin(), 0.0, (f as f64 * 0.05).cos());
     type Edit = fn(&mut Simulation, u64, DVec3);
     let cases: [(&str, Edit); 4] = [
         ("no edit", |_, _, _| {}),
