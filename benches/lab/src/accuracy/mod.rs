@@ -291,7 +291,12 @@ const LARGE: usize = 20_000;
 fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
     let c = step_control::choose(packed, integrator, T);
     let large = packed.spring_count() > LARGE;
-    match (c.limit, large) {
+    // An integrator without a stability limit (XPBD's bound is for accuracy) gets the wide
+    // ladder, large steps included.
+    let limit = c
+        .limit
+        .filter(|_| step_control::stable_omega_h(integrator, 0.0).is_some());
+    match (limit, large) {
         (Some(_), false) => {
             let n = c.substeps as u64;
             vec![(n / 2).max(1), n, 2 * n, 4 * n]
