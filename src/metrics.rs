@@ -218,6 +218,37 @@ pub fn first_non_finite(packed: &Packed) -> Option<usize> {
     (0..packed.particle_count()).find(|&i| !finite_state(packed.x[i], packed.v[i]))
 }
 
+/// The scene's energy scale (J), what energy changes are measured against:
+/// `max(E_kin + E_spring, M |g| H)`, with `M` the free particles' mass and `H` the diagonal of
+/// the particles' bounding box, the furthest a part of the scene can fall (a chain released
+/// horizontally swings down its length). One read of the state.
+pub fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
+    let g = gravity.length();
+    let (mut kinetic, mut mass) = (0.0, 0.0);
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for i in 0..packed.particle_count() {
+        (lo, hi) = (lo.min(packed.x[i]), hi.max(packed.x[i]));
+        if packed.inv_mass[i] != 0.0 {
+            let m = packed.mass(i);
+            mass += m;
+            kinetic += 0.5 * m * packed.v[i].length_squared();
+        }
+    }
+    let spring: f64 = packed
+        .all_springs()
+        .map(|s| {
+            let d = packed.stretch(&s);
+            0.5 * s.stiffness * d * d
+        })
+        .sum();
+    let height = if packed.particle_count() > 0 {
+        (hi - lo).length()
+    } else {
+        0.0
+    };
+    (kinetic + spring).max(mass * g * height)
+}
+
 /// How many particles have a non-finite position or velocity.
 pub fn non_finite_count(packed: &Packed) -> usize {
     packed

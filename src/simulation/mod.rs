@@ -55,6 +55,11 @@ pub struct Diagnostics {
     pub quarantined: usize,
     /// The first frame of the run whose state was finite but wrong (see [`crate::Failure`]).
     pub failure: Option<crate::Failure>,
+    /// What energy changes are measured against (J): `max(E_kin + E_spring, M |g| H)` with
+    /// `M` the free particles' mass and `H` the diagonal of all particles' bounding box (the
+    /// furthest a part of the scene can fall), taken when the World was last gathered (at
+    /// load, and after a change to it).
+    pub energy_scale: f64,
 }
 
 /// A mass-spring simulation over a hecs World.
@@ -102,6 +107,8 @@ pub struct Simulation {
     newly_quarantined: usize,
     /// The run's first [`crate::Failure`].
     failure: Option<crate::Failure>,
+    /// [`Diagnostics::energy_scale`], taken at every World gather.
+    energy_scale: f64,
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -190,6 +197,7 @@ impl Simulation {
             contained: Vec::new(),
             newly_quarantined: 0,
             failure: None,
+            energy_scale: 0.0,
             choice: None,
             parallel: false,
             steps: 0,
@@ -378,6 +386,7 @@ impl Simulation {
             max_strain: stretch.tension,
             max_compression: stretch.compression,
             failure: self.failure,
+            energy_scale: self.energy_scale,
             step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
                 .map_or(0.0, |r| r.0),
             non_finite: metrics::non_finite_count(&self.packed),

@@ -287,7 +287,9 @@ impl Simulation {
         // In place: the old buffers go before the new ones are made (never two copies), and
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
-        self.refresh()
+        self.refresh()?;
+        self.energy_scale = crate::metrics::energy_scale(&self.packed, self.config.gravity);
+        Ok(())
     }
 
     /// Everything after the buffers changed: the checks, the step choice, the solver's

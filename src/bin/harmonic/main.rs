@@ -528,8 +528,17 @@ fn run(args: RunArgs) -> Result<(), String> {
         100.0 * max_strain,
         100.0 * max_compression
     );
+    let scale = start.energy_scale;
+    let relative = if scale > 0.0 {
+        format!(
+            "{:+.3} % of the scene's energy scale, {scale:.4e} J",
+            100.0 * (end.energy - start.energy) / scale
+        )
+    } else {
+        "no energy scale: the scene starts at rest and unstretched, with nothing to fall".into()
+    };
     println!(
-        "energy: start {:.6e} J, end {:.6e} J",
+        "energy: start {:.6e} J, end {:.6e} J ({relative})",
         start.energy, end.energy
     );
     if let Some(bytes) = peak_rss() {
