@@ -54,20 +54,21 @@ fn reduce_springs<R: Copy + Send + Sync>(
     join: impl Fn(R, R) -> R + Sync + Send,
 ) -> R {
     let row = |g: &crate::buffers::PackedGrid, r: u32| {
-        let (cols, rows) = (g.cols, g.rows);
-        let at = |c: u32, r: u32| (g.base + r * cols + c) as usize;
         let mut acc = identity;
         for l in &g.links {
-            let (dc, dr) = l.offset;
-            let (adc, adr) = (dc.unsigned_abs(), dr.unsigned_abs());
-            if adc >= cols || r + adr >= rows {
+            let Some((a, b, n)) = g.link_row(l, r) else {
                 continue;
-            }
-            let (ca, ra) = ((-dc).max(0) as u32, r + (-dr).max(0) as u32);
-            let (cb, rb) = (dc.max(0) as u32, r + dr.max(0) as u32);
-            for col in 0..cols - adc {
-                let (a, b) = (at(col + ca, ra), at(col + cb, rb));
-                acc = join(acc, one(a, b, l.rest_length, l.stiffness));
+            };
+            for k in 0..n {
+                acc = join(
+                    acc,
+                    one(
+                        (a + k) as usize,
+                        (b + k) as usize,
+                        l.rest_length,
+                        l.stiffness,
+                    ),
+                );
             }
         }
         acc
@@ -182,20 +183,9 @@ fn nan_max(a: f64, b: f64) -> f64 {
 
 /// Largest `|δ|/l0` over all springs; NaN if any spring's is.
 pub fn max_strain(packed: &Packed) -> f64 {
-    let strain = |s: PackedSpring| packed.stretch(&s).abs() / s.rest;
-    // Unlike f64::max, keeps a NaN so a broken state cannot report a small strain.
-    let max = |a: f64, b: f64| {
-        if a.is_nan() || b.is_nan() {
-            f64::NAN
-        } else {
-            a.max(b)
-        }
-    };
-    if packed.spring_count() < PAR_MIN {
-        packed.all_springs().map(strain).fold(0.0, max)
-    } else {
-        packed.par_springs().map(strain).reduce(|| 0.0, max)
-    }
+    let x = &packed.x[..];
+    let strain = |a: usize, b: usize, rest: f64, _| ((x[b] - x[a]).length() - rest).abs() / rest;
+    reduce_springs(packed, 0.0, strain, nan_max)
 }
 
 /// `h/h_c` of the stiffest spring, `h_c = π/ω0`, and that spring's index.

@@ -198,6 +198,22 @@ impl PackedGrid {
             .min(self.rows.saturating_sub(1) as usize)
     }
 
+    /// Link `l`'s springs anchored in grid row `row`: the packed ends of the first,
+    /// `(a, b)`, and how many there are; the `k`-th joins `a + k` to `b + k`. None when the
+    /// link reaches past the grid. The one definition of where a grid's springs are.
+    #[inline]
+    pub fn link_row(&self, l: &GridLink, row: u32) -> Option<(u32, u32, u32)> {
+        let (dc, dr) = l.offset;
+        let (adc, adr) = (dc.unsigned_abs(), dr.unsigned_abs());
+        if adc >= self.cols || row + adr >= self.rows {
+            return None;
+        }
+        let at = |c: u32, r: u32| self.base + r * self.cols + c;
+        let a = at((-dc).max(0) as u32, row + (-dr).max(0) as u32);
+        let b = at(dc.max(0) as u32, row + dr.max(0) as u32);
+        Some((a, b, self.cols - adc))
+    }
+
     /// The springs of grid row `row`, each once, in the order expansion packs them: cell by
     /// cell, the links in order, a link with `dc < 0` anchored `|dc|` columns right.
     fn row_springs<'a>(
@@ -205,20 +221,12 @@ impl PackedGrid {
         row: u32,
         inv_mass: &'a [f64],
     ) -> impl Iterator<Item = PackedSpring> + 'a {
-        let (cols, rows) = (self.cols, self.rows);
-        (0..cols).flat_map(move |col| {
+        (0..self.cols).flat_map(move |col| {
             self.links.iter().filter_map(move |l| {
-                let (dc, dr) = l.offset;
-                let (adc, adr) = (dc.unsigned_abs(), dr.unsigned_abs());
-                if col + adc >= cols || row + adr >= rows {
-                    return None;
-                }
-                let at = |c: u32, r: u32| self.base + r * cols + c;
-                let a = at(col + (-dc).max(0) as u32, row + (-dr).max(0) as u32);
-                let b = at(col + dc.max(0) as u32, row + dr.max(0) as u32);
+                let (a, b, _) = self.link_row(l, row).filter(|&(_, _, n)| col < n)?;
                 Some(PackedSpring::new(
-                    a,
-                    b,
+                    a + col,
+                    b + col,
                     l.rest_length,
                     l.stiffness,
                     l.damping,
