@@ -226,7 +226,18 @@ pub struct SimConfig {
     /// [`crate::Failure`] (10: a spring eleven times its rest length); infinite to not check.
     /// Checked once per frame, one read of the springs.
     pub strain_limit: f64,
+    /// The energy the steps may make, as a share of the energy scale: the automatic substeps
+    /// keep the run's peak residual ([`crate::EnergyAudit::peak_residual`]) within it (1 %).
+    pub tolerance: f64,
+    /// The peak residual, as a share of the energy scale, past which a frame is reported as a
+    /// [`crate::Failure::Energy`] (10 × the default tolerance); infinite to not check.
+    pub energy_limit: f64,
 }
+
+/// [`SimConfig::tolerance`]'s default: 1 % of the energy scale.
+pub const DEFAULT_TOLERANCE: f64 = 0.01;
+/// [`SimConfig::energy_limit`]'s default: ten times the default tolerance.
+pub const DEFAULT_ENERGY_LIMIT: f64 = 0.1;
 
 /// [`SimConfig::strain_limit`]'s default: far past any cloth that is only stretching (the
 /// 128×128 cloth on 200 Hz springs pinned at two corners reaches 8.6), caught within frames
@@ -244,6 +255,8 @@ impl Default for SimConfig {
             exact_displacement: false,
             backend: Backend::Cpu,
             strain_limit: DEFAULT_STRAIN_LIMIT,
+            tolerance: DEFAULT_TOLERANCE,
+            energy_limit: DEFAULT_ENERGY_LIMIT,
         }
     }
 }
@@ -262,6 +275,12 @@ impl SimConfig {
         }
         if self.strain_limit.is_nan() || self.strain_limit <= 0.0 {
             return Err(SimError::BadStrainLimit(self.strain_limit));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(SimError::BadTolerance(self.tolerance));
+        }
+        if self.energy_limit.is_nan() || self.energy_limit <= 0.0 {
+            return Err(SimError::BadEnergyLimit(self.energy_limit));
         }
         Ok(())
     }

@@ -103,6 +103,12 @@ pub enum SimError {
     /// `SimConfig::strain_limit` is not > 0.
     #[error("strain limit must be > 0 (infinite: not checked), got {0:?}")]
     BadStrainLimit(f64),
+    /// `SimConfig::tolerance` is not finite and > 0.
+    #[error("energy tolerance must be finite and > 0 (a share of the energy scale), got {0:?}")]
+    BadTolerance(f64),
+    /// `SimConfig::energy_limit` is not > 0.
+    #[error("energy limit must be > 0 (a share of the energy scale; infinite: not checked), got {0:?}")]
+    BadEnergyLimit(f64),
     /// A config asks for 0 substeps per frame.
     #[error("substeps must be ≥ 1")]
     NoSubsteps,

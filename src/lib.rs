@@ -34,6 +34,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 #![warn(missing_docs)]
 
+mod audit;
 mod buffers;
 mod components;
 mod config;
@@ -66,6 +67,7 @@ pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
+pub use audit::EnergyAudit;
 pub use schedule::{Failure, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
 pub use step_control::StepChoice;

@@ -22,6 +22,8 @@ pub struct StepStats {
     pub quarantined: usize,
     /// Why this frame's state, though finite, is not to be trusted (None: nothing found).
     pub failure: Option<Failure>,
+    /// The frame's energy books ([`crate::EnergyAudit`]).
+    pub audit: crate::EnergyAudit,
 }
 
 /// A frame whose state is finite but wrong: the engine reports it, never as success.
@@ -48,6 +50,29 @@ pub enum Failure {
         /// Substeps of the frame.
         substeps: u32,
     },
+    /// The steps made energy: the run's peak residual ([`crate::EnergyAudit::peak_residual`])
+    /// passed [`crate::SimConfig::energy_limit`] of the energy scale. Energy created beyond
+    /// what went in, though every spring is within the strain limit.
+    Energy {
+        /// The frame (1 for the first step).
+        frame: u64,
+        /// The peak residual (J).
+        created: f64,
+        /// The energy scale (J).
+        scale: f64,
+        /// The limit it passed, a share of the scale.
+        limit: f64,
+        /// The integrator that stepped it.
+        integrator: crate::Integrator,
+        /// The stiffest spring's `h/h_c` (`h_c = π/ω0`).
+        step_ratio: f64,
+        /// The ends of the spring stretched most (particles in scene order).
+        particles: (usize, usize),
+        /// That spring's extension `δ/l0`.
+        strain: f64,
+        /// Substeps of the frame.
+        substeps: u32,
+    },
 }
 
 impl std::fmt::Display for Failure {
@@ -70,6 +95,28 @@ impl std::fmt::Display for Failure {
                  far, raise `strain_limit`",
                 100.0 * strain,
                 100.0 * limit
+            ),
+            Failure::Energy {
+                frame,
+                created,
+                scale,
+                limit,
+                integrator,
+                step_ratio,
+                particles: (a, b),
+                strain,
+                substeps,
+            } => write!(
+                f,
+                "frame {frame}: the steps made {created:.4e} J of energy beyond what went in, \
+                 {:.4} % of the energy scale ({scale:.4e} J), past the energy limit of {:.4} % \
+                 ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} for the stiffest \
+                 spring; the spring stretched most joins particles {a} and {b}, at {:.4} %). The \
+                 step is too large for the accuracy asked: lower dt, raise the substeps or leave \
+                 them automatic, or choose another integrator; raise `energy_limit` to accept it",
+                100.0 * created / scale,
+                100.0 * limit,
+                100.0 * strain
             ),
         }
     }

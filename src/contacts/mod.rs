@@ -26,6 +26,7 @@ use rapier3d::prelude::{
 };
 use rayon::prelude::*;
 
+use crate::audit::{self, ProjectionLines};
 use crate::buffers::Packed;
 use crate::scene::props::{BodyDef, BodyKind, ContactMaterial, Keyframe, Shape};
 

@@ -22,6 +22,17 @@ pub struct ContactStage {
     /// Per chunk and candidate: whether the candidate's box meets the chunk's paths.
     pub(super) near: Vec<bool>,
     pub stats: ContactStats,
+    /// Gravity, for the energy the stage's projections change.
+    pub(crate) gravity: DVec3,
+    /// The positions before this substep's contact pass (the energy audit's spring terms).
+    pub(super) pre: Vec<DVec3>,
+    /// The velocities at the substep's start (the drift a held particle books on its contact).
+    pub(super) v_start: Vec<DVec3>,
+    /// Per chunk: the energy its contacts and friction removed from the particles themselves,
+    /// and how many particles it pushed.
+    pub(super) removed: Vec<[f64; 3]>,
+    /// What the projections did to the cloth's energy this frame.
+    pub(crate) energy: ProjectionLines,
 }
 
 /// A collider's shape, the common primitives by value.
@@ -74,6 +85,11 @@ impl ContactStage {
             sums: Vec::new(),
             near: Vec::new(),
             stats: ContactStats::default(),
+            gravity: DVec3::ZERO,
+            pre: Vec::new(),
+            v_start: Vec::new(),
+            removed: Vec::new(),
+            energy: ProjectionLines::default(),
         }
     }
 
@@ -110,6 +126,8 @@ impl ContactStage {
             self.prev.extend_from_slice(&packed.x);
         }
         self.prev_valid = false;
+        self.v_start.clear();
+        self.v_start.extend_from_slice(&packed.v);
     }
 
     /// Particles moved between substeps by something other than this stage.
@@ -120,6 +138,7 @@ impl ContactStage {
     /// The state may have been edited between frames: the first substep copies it.
     pub fn begin_frame(&mut self) {
         self.stats = ContactStats::default();
+        self.energy = ProjectionLines::default();
         self.prev_valid = false;
     }
 
@@ -154,8 +173,10 @@ impl ContactStage {
                 body.apply_impulse_at_point(-j.as_vec3(), target, true);
                 self.stats.impulse_on_bodies -= j;
             }
+            let before = audit::local_energy(packed, i, self.gravity);
             packed.x[i] = target.as_dvec3();
             packed.v[i] = vb;
+            self.energy.attachments += audit::local_energy(packed, i, self.gravity) - before;
         }
     }
 
@@ -236,6 +257,11 @@ impl ContactStage {
         self.sums.resize(chunks * nc, Exchange::default());
         self.near.clear();
         self.near.resize(chunks * nc, false);
+        self.removed.clear();
+        self.removed.resize(chunks, [0.0; 3]);
+        self.pre.clear();
+        self.pre.extend_from_slice(&packed.x);
+        let g = self.gravity;
         let (candidates, held) = (&self.candidates, &self.held);
         let Packed { x, v, inv_mass, .. } = packed;
         let inv_mass = &inv_mass[..];
@@ -248,14 +274,16 @@ impl ContactStage {
         } else {
             1
         };
+        let v_start = &self.v_start[..];
         x.par_chunks_mut(CHUNK)
             .zip(v.par_chunks_mut(CHUNK))
             .zip(self.prev.par_chunks_mut(CHUNK))
             .zip(self.sums.par_chunks_mut(nc))
             .zip(self.near.par_chunks_mut(nc))
+            .zip(self.removed.par_iter_mut())
             .enumerate()
             .with_min_len(min_len)
-            .for_each(|(k, ((((xs, vs), prev), sums), near))| {
+            .for_each(|(k, (((((xs, vs), prev), sums), near), removed))| {
                 // Broad phase, coarse: the colliders whose box meets the box of this chunk's
                 // paths (computed here, while the chunk is in cache).
                 let base = k * CHUNK;
@@ -284,6 +312,7 @@ impl ContactStage {
                         continue;
                     }
                     let mut supported = false;
+                    let mut held_here = false;
                     for (ci, cand) in candidates.iter().enumerate() {
                         if !near[ci] {
                             continue;
@@ -321,13 +350,33 @@ impl ContactStage {
                             continue;
                         }
                         supported |= !cand.dynamic;
+                        let (x_old, old) = (*xi, *vi);
                         *xi = hit.point + hit.normal * c.thickness;
+                        let m = 1.0 / inv_mass[i];
+                        // The push-out's change of the particle's own energy (its springs' are
+                        // booked after the pass).
+                        removed[0] += m * g.dot(*xi - x_old);
+                        if !held_here && v_start.len() == inv_mass.len() {
+                            // The step's drift error under gravity, −m g·Δx + h m g·(v₀ + v₁)/2,
+                            // belongs to the contact that holds the particle: so a cloth at rest
+                            // books no residual.
+                            held_here = true;
+                            let drift = -m * g.dot(x_old - prev[j]) + 0.5 * h * m * g.dot(v_start[i] + old);
+                            removed[0] -= drift;
+                        }
+                        removed[2] += 1.0;
                         let vb = cand.velocity_at(hit.point);
-                        let old = *vi;
                         let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
                             continue;
                         };
                         *vi = vb + new;
+                        let n = hit.normal;
+                        let (u, u1) = (old - vb, new);
+                        let (ut, ut1) = (u - u.dot(n) * n, u1 - u1.dot(n) * n);
+                        let friction = 0.5 * m * (ut.length_squared() - ut1.length_squared());
+                        let kinetic = 0.5 * m * (old.length_squared() - vi.length_squared());
+                        removed[0] += kinetic - friction;
+                        removed[1] += friction;
                         if cand.dynamic {
                             // The body gets −J at the contact point: force and torque.
                             let j = (*vi - old) / inv_mass[i];
@@ -339,6 +388,7 @@ impl ContactStage {
                 prev.copy_from_slice(xs);
             });
         self.prev_valid = true;
+        self.book_springs(packed);
         for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
             for s in self.sums.iter().skip(ci).step_by(nc) {
@@ -347,6 +397,37 @@ impl ContactStage {
             let body = cand.body.filter(|_| cand.dynamic);
             apply(&mut self.stats, bodies, body, &total);
         }
+    }
+}
+
+impl ContactStage {
+    /// Books the contact pass's energy: what each chunk removed from its particles, and the
+    /// change of the springs at the particles it moved, each spring once (chunk order).
+    fn book_springs(&mut self, packed: &Packed) {
+        let (x, pre) = (&packed.x[..], &self.pre[..]);
+        let moved = |i: usize| x[i] != pre[i];
+        let mut springs = 0.0;
+        for (k, r) in self.removed.iter().enumerate() {
+            self.energy.contacts += r[0];
+            self.energy.friction += r[1];
+            if r[2] == 0.0 {
+                continue;
+            }
+            for i in k * CHUNK..((k + 1) * CHUNK).min(x.len()) {
+                if !moved(i) {
+                    continue;
+                }
+                audit::springs_at(packed, i, |l| {
+                    let other = if l.a == i { l.b } else { l.a };
+                    if moved(other) && other < i {
+                        return;
+                    }
+                    let before = audit::spring_energy(pre, l);
+                    springs += audit::spring_energy(x, l) - before;
+                });
+            }
+        }
+        self.energy.contacts -= springs;
     }
 }
 

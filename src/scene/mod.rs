@@ -128,6 +128,12 @@ pub struct Scene {
     /// [`crate::SimConfig::strain_limit`] (absent: its default; `inf`: not checked).
     #[serde(default)]
     pub strain_limit: Option<f64>,
+    /// [`crate::SimConfig::tolerance`] (absent: 1 % of the energy scale).
+    #[serde(default)]
+    pub tolerance: Option<f64>,
+    /// [`crate::SimConfig::energy_limit`] (absent: 10 %; `inf`: not checked).
+    #[serde(default)]
+    pub energy_limit: Option<f64>,
     /// Explicit particles: scene indices 0, 1, … in this order.
     #[serde(default)]
     pub particles: Vec<ParticleDef>,
@@ -325,6 +331,8 @@ impl Scene {
             exact_displacement: false,
             seconds: None,
             strain_limit: None,
+            tolerance: None,
+            energy_limit: None,
             particles: vec![],
             springs: vec![],
             cloths: vec![],

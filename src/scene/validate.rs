@@ -134,6 +134,22 @@ impl Scene {
                 );
             }
         }
+        if let Some(t) = self.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                is.push(
+                    "tolerance",
+                    format!("must be finite and > 0 (a share of the energy scale), got {t:?}"),
+                );
+            }
+        }
+        if let Some(l) = self.energy_limit {
+            if l.is_nan() || l <= 0.0 {
+                is.push(
+                    "energy_limit",
+                    format!("must be > 0 (a share of the energy scale; inf: not checked), got {l:?}"),
+                );
+            }
+        }
         if let Some(t) = self.seconds {
             // How many frames that is, is checked where a run takes its length from it
             // (`Limits::frames`, `harmonic run`): a scene stepped by a game has no end.

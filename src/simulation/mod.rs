@@ -60,6 +60,9 @@ pub struct Diagnostics {
     /// furthest a part of the scene can fall), taken when the World was last gathered (at
     /// load, and after a change to it).
     pub energy_scale: f64,
+    /// The energy audit of the run so far (the lines summed over its frames; zero before the
+    /// first step).
+    pub audit: crate::EnergyAudit,
 }
 
 /// A mass-spring simulation over a hecs World.
@@ -109,6 +112,8 @@ pub struct Simulation {
     failure: Option<crate::Failure>,
     /// [`Diagnostics::energy_scale`], taken at every World gather.
     energy_scale: f64,
+    /// The energy audit's books and scratch.
+    auditor: crate::audit::Auditor,
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -198,6 +203,7 @@ impl Simulation {
             newly_quarantined: 0,
             failure: None,
             energy_scale: 0.0,
+            auditor: Default::default(),
             choice: None,
             parallel: false,
             steps: 0,
@@ -387,6 +393,7 @@ impl Simulation {
             max_compression: stretch.compression,
             failure: self.failure,
             energy_scale: self.energy_scale,
+            audit: self.auditor.run,
             step_ratio: metrics::worst_step_ratio(&self.packed, self.config.h())
                 .map_or(0.0, |r| r.0),
             non_finite: metrics::non_finite_count(&self.packed),

@@ -35,6 +35,7 @@ impl Simulation {
         let stage = self.user_stage.get_or_insert_with(|| {
             let mut s = ContactStage::new(self.contact);
             s.gather(&self.world, &self.packed);
+            s.gravity = self.config.gravity;
             s
         });
         if let Some(particle) = stage.dangling(&self.world, bodies) {
@@ -58,8 +59,10 @@ impl Simulation {
     ) -> Result<&StepStats, SimError> {
         let t0 = Instant::now();
         let gathered = self.dirty;
+        let edited = self.dirty || !self.pins.is_empty() || self.state_edited;
         self.contained.clear();
         self.sync()?;
+        self.open_books(edited);
         let t1 = Instant::now();
         let h = self.config.h();
         let substeps = self.config.substeps;
@@ -110,25 +113,36 @@ impl Simulation {
                     }
                 }
             }
-            return self.finish_frame(t0, t1, gathered, contacts, None);
+            let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
+            return self.finish_frame(t0, t1, gathered, contacts, None, projections);
         }
         let (solver, packed) = (&mut self.solver, &mut self.packed);
         let (world, found) = (&self.world, &mut self.contained);
+        let auditor = &mut self.auditor;
+        let law = crate::audit::DamperLaw::of(self.config.integrator);
+        let coupling_ref = &mut coupling;
         let contacts_time = &mut contacts;
         // The strain check reads the frame's end state inside the same rayon job.
         let check = self.config.strain_limit.is_finite();
         let limit = self.config.strain_limit;
         let mut beyond = None;
         let beyond_out = &mut beyond;
-        let mut integrate = move || {
+        let integrate = move || {
+            let coupling = coupling_ref;
             (1..=substeps).try_for_each(|k| {
                 match coupling.as_mut() {
-                    None => solver.substep(packed, h)?,
+                    None => {
+                        auditor.begin_substep(packed);
+                        solver.substep(packed, h)?;
+                        auditor.damping(packed, law, h);
+                    }
                     Some(c) => {
                         let t = Instant::now();
                         c.begin_substep(packed);
                         *contacts_time += t.elapsed();
+                        auditor.begin_substep(packed);
                         solver.substep(packed, h)?;
+                        auditor.damping(packed, law, h);
                         let t = Instant::now();
                         c.substep(packed, h, k);
                         *contacts_time += t.elapsed();
@@ -153,7 +167,18 @@ impl Simulation {
         } else {
             integrate()?;
         }
-        self.finish_frame(t0, t1, gathered, contacts, beyond)
+        let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
+        self.finish_frame(t0, t1, gathered, contacts, beyond, projections)
+    }
+
+    /// Opens the frame's energy books: `E` after the edits (`edited`: the World, pins or the
+    /// state changed since the last frame; otherwise the last frame's end stands).
+    fn open_books(&mut self, edited: bool) {
+        let start = match self.auditor.end {
+            Some(e) if !edited => e,
+            _ => self.auditor.energy(&self.packed, self.config.gravity),
+        };
+        self.auditor.begin_frame(start, self.energy_scale);
     }
 
     /// The end of a frame: the quarantine (the state is finite: every substep ended with
@@ -166,14 +191,17 @@ impl Simulation {
         gathered: bool,
         contacts: Duration,
         beyond: Option<bool>,
+        projections: crate::audit::ProjectionLines,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.quarantine();
         self.steps += 1;
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
+        let end = self.auditor.energy(&self.packed, self.config.gravity);
+        self.auditor.end_frame(end, projections, quarantined > 0);
         self.packed.scatter(&mut self.world);
-        let failure = self.check_strain(beyond);
+        let failure = self.check_strain(beyond).or_else(|| self.check_energy());
         self.failure = self.failure.or(failure);
         let t3 = Instant::now();
         self.stats = StepStats {
@@ -185,8 +213,31 @@ impl Simulation {
             substeps: self.config.substeps,
             quarantined,
             failure,
+            audit: self.auditor.frame,
         };
         Ok(&self.stats)
+    }
+
+    /// The energy limit, checked on the run's books at the frame's end.
+    fn check_energy(&self) -> Option<crate::Failure> {
+        let run = &self.auditor.run;
+        let limit = self.config.energy_limit;
+        if !(run.peak_residual > limit * run.scale) {
+            return None;
+        }
+        let h = self.config.h();
+        let worst = crate::metrics::most_stretched(&self.packed, h);
+        Some(crate::Failure::Energy {
+            frame: self.steps,
+            created: run.peak_residual,
+            scale: run.scale,
+            limit,
+            integrator: self.config.integrator,
+            step_ratio: crate::metrics::worst_step_ratio(&self.packed, h).map_or(0.0, |r| r.0),
+            particles: worst.map_or((0, 0), |w| w.ends),
+            strain: worst.map_or(0.0, |w| w.strain),
+            substeps: self.config.substeps,
+        })
     }
 
     /// The strain limit, checked on the frame's end state: one read of the springs, and the
@@ -314,6 +365,7 @@ impl Simulation {
         }
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
+        self.auditor.prepare(&self.packed);
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
         if let Some(p) = &mut self.props {
@@ -321,9 +373,11 @@ impl Simulation {
                 return Err(SimError::DanglingAttachment { particle });
             }
             p.gather(&self.world, &self.packed);
+            p.stage_mut().gravity = self.config.gravity;
         }
         if let Some(s) = &mut self.user_stage {
             s.gather(&self.world, &self.packed);
+            s.gravity = self.config.gravity;
         }
         #[cfg(feature = "gpu")]
         if let Some(gpu) = &mut self.gpu {

@@ -1,0 +1,430 @@
+//! The energy audit: every frame, the cloth's mechanical energy booked against what went in
+//! and out, as discrete work, so that what is left, the residual, is the integrator's own
+//! energy error (`../shared/MATH.md`, "The energy audit"; the lines are defined on
+//! [`EnergyAudit`]).
+//!
+//! Every sum runs over fixed blocks (loose springs by [`BLOCK`], a cloth grid by rows,
+//! particles by [`BLOCK`]) added in block order, so the books are bit-identical on any number
+//! of threads.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::buffers::Packed;
+use crate::config::Integrator;
+use crate::integrate::harmonic::{self, Linear};
+
+/// Elements per block of the audit's fixed-order sums.
+pub(crate) const BLOCK: usize = 4096;
+
+/// The energy books of a frame ([`crate::StepStats::audit`]) or of the run so far
+/// ([`crate::Diagnostics::audit`]), in joules. The audited system is the cloth: its energy
+/// `E = Σ ½ m|v|² − Σ m g·x + Σ ½ κ δ²` over free particles and all springs. Over a frame
+///
+/// `E₁ − E₀ = edits + attachments − damping − contacts − friction − quarantine + residual`.
+///
+/// Each line is discrete work: a damper's force over a substep does `h F·(v₀ + v₁)/2`
+/// (symplectic and explicit Euler, RK4; at the step's end for implicit Euler, θ-mg and XPBD),
+/// and the closed-form integrators book each damped spring's exact loss as an oscillator over
+/// the step. A projection (a contact's push-out and velocity change, an attachment moving its
+/// particle) books the change of `E` it made, springs included. So a cloth resting on a
+/// collider books no residual of its own, and the residual is the integrator's error: positive
+/// when the step made energy, negative when it damped the motion numerically.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EnergyAudit {
+    /// `E` at the start (J).
+    pub start: f64,
+    /// `E` at the end (J).
+    pub energy: f64,
+    /// Put in by the game between frames: particles dragged, pinned, freed or given a
+    /// velocity, cloths added or removed, gravity changed (the change of `E` each made).
+    pub edits: f64,
+    /// Put in by attached particles following their bodies, within the frame.
+    pub attachments: f64,
+    /// Dissipated by the springs' dampers (≥ 0 for dampers with `c ≥ 0`).
+    pub damping: f64,
+    /// Removed by the contacts' push-out and their normal velocity change (work by a moving
+    /// collider included; a restitution `e` keeps `e²` of the approach's energy).
+    pub contacts: f64,
+    /// Removed by friction (the tangential velocity change against the collider).
+    pub friction: f64,
+    /// Removed by the quarantine: in a frame that froze particles, the change of `E` the
+    /// other lines leave unexplained is booked here (a blow-up, not an integration error).
+    pub quarantine: f64,
+    /// The numerical energy error: `E₁ − E₀` less every line above.
+    pub residual: f64,
+    /// The largest the cumulative residual has been since the run began (≥ 0): energy the
+    /// steps made beyond what went in, what the automatic substeps keep within
+    /// [`crate::SimConfig::tolerance`] of the scale.
+    pub peak_residual: f64,
+    /// The energy scale the residual is measured against ([`crate::Diagnostics::energy_scale`]).
+    pub scale: f64,
+}
+
+impl EnergyAudit {
+    /// The residual as a share of the energy scale.
+    pub fn relative_residual(&self) -> f64 {
+        self.residual / self.scale
+    }
+
+    /// The peak residual as a share of the energy scale.
+    pub fn relative_peak(&self) -> f64 {
+        self.peak_residual / self.scale
+    }
+
+    fn lines_add(&mut self, o: &EnergyAudit) {
+        self.edits += o.edits;
+        self.attachments += o.attachments;
+        self.damping += o.damping;
+        self.contacts += o.contacts;
+        self.friction += o.friction;
+        self.quarantine += o.quarantine;
+        self.residual += o.residual;
+    }
+}
+
+/// What the projections of a contact stage did to the cloth's energy in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct ProjectionLines {
+    pub attachments: f64,
+    pub contacts: f64,
+    pub friction: f64,
+}
+
+/// How a damper's discrete work over a substep is booked.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum DamperLaw {
+    /// Force at the step's start: `h c δ̇₀ (δ̇₀ + δ̇₁)/2`, both rates along the start's axis.
+    Start,
+    /// Force at the step's end: `h c δ̇₁ (δ̇₀ + δ̇₁)/2`, along the end's axis.
+    End,
+    /// The spring's exact loss as an isolated oscillator over `h`, from its start state.
+    Oscillator,
+}
+
+impl DamperLaw {
+    pub(crate) fn of(integrator: Integrator) -> Self {
+        use Integrator::*;
+        match integrator {
+            SymplecticEuler | ExplicitEuler | Rk4 => DamperLaw::Start,
+            ImplicitEuler | ThetaMg | Xpbd => DamperLaw::End,
+            Harmonic | HarmonicGs | HarmonicSgs | HarmonicForced | HarmonicForcedGs
+            | HarmonicPaper => DamperLaw::Oscillator,
+        }
+    }
+}
+
+/// A spring as the audit walks it: ends, rest length, stiffness, damping.
+#[derive(Clone, Copy)]
+pub(crate) struct Link {
+    pub a: usize,
+    pub b: usize,
+    pub rest: f64,
+    pub stiffness: f64,
+    pub damping: f64,
+}
+
+/// A block of the fixed-order sums over springs.
+#[derive(Clone, Copy, Debug)]
+enum Block {
+    Loose(usize, usize),
+    Row(usize, u32),
+}
+
+/// The audit's state between frames and its scratch (sized at gather; a step allocates
+/// nothing).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Auditor {
+    blocks: Vec<Block>,
+    sums: Vec<f64>,
+    /// The state at the current substep's start (scenes with dampers only).
+    x0: Vec<DVec3>,
+    v0: Vec<DVec3>,
+    /// Whether any spring has a damper.
+    pub damped: bool,
+    parallel: bool,
+    /// `E` at the end of the last frame (None before the first).
+    pub end: Option<f64>,
+    /// The frame being booked.
+    pub frame: EnergyAudit,
+    /// The run so far.
+    pub run: EnergyAudit,
+}
+
+impl Auditor {
+    /// Sizes the blocks and scratch for the packed buffers (after every gather or repin).
+    pub fn prepare(&mut self, packed: &Packed) {
+        self.blocks.clear();
+        let m = packed.springs.len();
+        self.blocks
+            .extend((0..m.div_ceil(BLOCK)).map(|k| Block::Loose(k * BLOCK, ((k + 1) * BLOCK).min(m))));
+        for (g, grid) in packed.topology.grids.iter().enumerate() {
+            self.blocks.extend((0..grid.rows).map(|r| Block::Row(g, r)));
+        }
+        let n = packed.particle_count();
+        let slots = self.blocks.len().max(n.div_ceil(BLOCK));
+        self.sums.resize(slots, 0.0);
+        self.damped = packed.springs.iter().any(|s| s.damping != 0.0)
+            || (packed.topology.grids.iter())
+                .any(|g| g.links.iter().any(|l| l.damping != 0.0));
+        let keep = if self.damped { n } else { 0 };
+        self.x0.resize(keep, DVec3::ZERO);
+        self.v0.resize(keep, DVec3::ZERO);
+        self.parallel = crate::integrate::runs_parallel(packed);
+    }
+
+    /// `Σ f` over every spring, in block order.
+    fn spring_sum(&mut self, packed: &Packed, f: impl Fn(Link) -> f64 + Sync + Send) -> f64 {
+        let blocks = &self.blocks;
+        let grids = &packed.topology.grids;
+        let block = |k: usize| -> f64 {
+            let mut acc = 0.0;
+            match blocks[k] {
+                Block::Loose(lo, hi) => {
+                    for s in &packed.springs[lo..hi] {
+                        acc += f(Link {
+                            a: s.a as usize,
+                            b: s.b as usize,
+                            rest: s.rest,
+                            stiffness: s.stiffness,
+                            damping: s.damping,
+                        });
+                    }
+                }
+                Block::Row(g, r) => {
+                    let grid = &grids[g];
+                    for l in &grid.links {
+                        let Some((a, b, n)) = grid.link_row(l, r) else {
+                            continue;
+                        };
+                        for k in 0..n {
+                            acc += f(Link {
+                                a: (a + k) as usize,
+                                b: (b + k) as usize,
+                                rest: l.rest_length,
+                                stiffness: l.stiffness,
+                                damping: l.damping,
+                            });
+                        }
+                    }
+                }
+            }
+            acc
+        };
+        let sums = &mut self.sums[..blocks.len()];
+        if self.parallel {
+            sums.par_iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+        } else {
+            sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+        }
+        sums.iter().sum()
+    }
+
+    /// `Σ f(i)` over every particle, in block order.
+    fn particle_sum(&mut self, n: usize, f: impl Fn(usize) -> f64 + Sync + Send) -> f64 {
+        let block = |k: usize| (k * BLOCK..((k + 1) * BLOCK).min(n)).map(&f).sum::<f64>();
+        let sums = &mut self.sums[..n.div_ceil(BLOCK)];
+        if self.parallel {
+            sums.par_iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+        } else {
+            sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+        }
+        sums.iter().sum()
+    }
+
+    /// The cloth's mechanical energy `E` (J), in fixed order.
+    pub fn energy(&mut self, packed: &Packed, gravity: DVec3) -> f64 {
+        let particles = self.particle_sum(packed.particle_count(), |i| particle_energy(packed, i, gravity));
+        let x = &packed.x;
+        let springs = self.spring_sum(packed, |l| spring_energy(x, l));
+        particles + springs
+    }
+
+    /// Keeps the state at a substep's start, for [`Self::damping`] after it.
+    pub fn begin_substep(&mut self, packed: &Packed) {
+        if self.damped {
+            self.x0.copy_from_slice(&packed.x);
+            self.v0.copy_from_slice(&packed.v);
+        }
+    }
+
+    /// What the dampers dissipated over the substep of `h` just taken (from the state
+    /// [`Self::begin_substep`] kept), booked on the frame.
+    pub fn damping(&mut self, packed: &Packed, law: DamperLaw, h: f64) {
+        if !self.damped {
+            return;
+        }
+        let (x0, v0) = (std::mem::take(&mut self.x0), std::mem::take(&mut self.v0));
+        let (x1, v1, inv) = (&packed.x[..], &packed.v[..], &packed.inv_mass[..]);
+        let loss = self.spring_sum(packed, |l| {
+            if l.damping == 0.0 {
+                return 0.0;
+            }
+            let (a, b) = (l.a, l.b);
+            damper_loss(
+                law,
+                h,
+                l,
+                (inv[a], inv[b]),
+                [x0[a], x0[b], v0[a], v0[b]],
+                [x1[a], x1[b], v1[a], v1[b]],
+            )
+        });
+        (self.x0, self.v0) = (x0, v0);
+        self.frame.damping += loss;
+    }
+
+    /// Opens the books of a frame: `start` is `E` after the game's edits, which are booked as
+    /// the change from the last frame's end.
+    pub fn begin_frame(&mut self, start: f64, scale: f64) {
+        let edits = self.end.map_or(0.0, |e| start - e);
+        if self.end.is_none() {
+            self.run = EnergyAudit {
+                start,
+                ..EnergyAudit::default()
+            };
+        }
+        self.frame = EnergyAudit {
+            start,
+            edits,
+            scale,
+            ..EnergyAudit::default()
+        };
+    }
+
+    /// Closes the frame's books at `end` (J); `quarantined`: the frame froze particles.
+    pub fn end_frame(&mut self, end: f64, projections: ProjectionLines, quarantined: bool) {
+        let f = &mut self.frame;
+        f.energy = end;
+        f.attachments = projections.attachments;
+        f.contacts = projections.contacts;
+        f.friction = projections.friction;
+        let unexplained = end - f.start - f.edits - f.attachments
+            + f.damping
+            + f.contacts
+            + f.friction;
+        if quarantined || !unexplained.is_finite() {
+            f.quarantine = -unexplained;
+        } else {
+            f.residual = unexplained;
+        }
+        self.run.lines_add(f);
+        self.run.energy = end;
+        self.run.scale = f.scale;
+        self.run.peak_residual = self.run.peak_residual.max(self.run.residual);
+        f.peak_residual = self.run.peak_residual;
+        self.end = Some(end);
+    }
+}
+
+/// `½ m|v|² − m g·x` of a free particle; a pinned one holds none.
+#[inline]
+pub(crate) fn particle_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 {
+    let inv = packed.inv_mass[i];
+    if inv == 0.0 {
+        return 0.0;
+    }
+    let m = 1.0 / inv;
+    0.5 * m * packed.v[i].length_squared() - m * gravity.dot(packed.x[i])
+}
+
+/// `½ κ δ²` of one spring at positions `x`.
+#[inline]
+pub(crate) fn spring_energy(x: &[DVec3], l: Link) -> f64 {
+    let d = (x[l.b] - x[l.a]).length() - l.rest;
+    0.5 * l.stiffness * d * d
+}
+
+/// One damper's discrete loss over a substep `h` from the ends' start `[xa, xb, va, vb]` and
+/// end states, by `law`; `inv` the ends' inverse masses.
+pub(crate) fn damper_loss(
+    law: DamperLaw,
+    h: f64,
+    l: Link,
+    inv: (f64, f64),
+    [xa0, xb0, va0, vb0]: [DVec3; 4],
+    [xa1, xb1, va1, vb1]: [DVec3; 4],
+) -> f64 {
+    let c = l.damping;
+    match law {
+        DamperLaw::Start => {
+            let n = (xb0 - xa0).normalize();
+            let (r0, r1) = (n.dot(vb0 - va0), n.dot(vb1 - va1));
+            h * c * r0 * 0.5 * (r0 + r1)
+        }
+        DamperLaw::End => {
+            let n = (xb1 - xa1).normalize();
+            let (r0, r1) = (n.dot(vb0 - va0), n.dot(vb1 - va1));
+            h * c * r1 * 0.5 * (r0 + r1)
+        }
+        DamperLaw::Oscillator => {
+            let w = inv.0 + inv.1;
+            if w == 0.0 {
+                return 0.0;
+            }
+            let mu = 1.0 / w;
+            let d = xb0 - xa0;
+            let len = d.length();
+            let n = d / len;
+            let (delta, rate) = (len - l.rest, n.dot(vb0 - va0));
+            let lin = harmonic::harmonic(l.stiffness / mu, c / (2.0 * mu), h);
+            oscillator_loss(&lin, mu, l.stiffness, h, delta, rate)
+        }
+    }
+}
+
+/// The loss of an isolated oscillator (`μ`, `κ`) over `h` from `(δ, δ̇)`, its step `lin`.
+#[inline]
+pub(crate) fn oscillator_loss(lin: &Linear, mu: f64, kappa: f64, h: f64, delta: f64, rate: f64) -> f64 {
+    let rate1 = rate + lin.phi(delta, rate);
+    let delta1 = delta + h * rate + lin.r * delta + lin.s * rate;
+    0.5 * mu * (rate * rate - rate1 * rate1) + 0.5 * kappa * (delta * delta - delta1 * delta1)
+}
+
+/// The springs touching particle `i`, each as a [`Link`] (loose ones by the topology's index,
+/// a grid's by its links both ways).
+pub(crate) fn springs_at(packed: &Packed, i: usize, mut f: impl FnMut(Link)) {
+    for &k in packed.topology.touching(i) {
+        let s = &packed.springs[k as usize];
+        f(Link {
+            a: s.a as usize,
+            b: s.b as usize,
+            rest: s.rest,
+            stiffness: s.stiffness,
+            damping: s.damping,
+        });
+    }
+    for g in &packed.topology.grids {
+        if !g.range().contains(&i) {
+            continue;
+        }
+        let (cols, rows) = (g.cols as i64, g.rows as i64);
+        let j = (i - g.base as usize) as i64;
+        let (c, r) = (j % cols, j / cols);
+        for l in &g.links {
+            let (dc, dr) = (l.offset.0 as i64, l.offset.1 as i64);
+            for s in [1, -1] {
+                let (cb, rb) = (c + s * dc, r + s * dr);
+                if cb < 0 || rb < 0 || cb >= cols || rb >= rows {
+                    continue;
+                }
+                let other = g.base as usize + (rb * cols + cb) as usize;
+                let (a, b) = if s == 1 { (i, other) } else { (other, i) };
+                f(Link {
+                    a,
+                    b,
+                    rest: l.rest_length,
+                    stiffness: l.stiffness,
+                    damping: l.damping,
+                });
+            }
+        }
+    }
+}
+
+/// The part of `E` that moving particle `i` alone changes: its own energy and its springs'.
+pub(crate) fn local_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 {
+    let mut e = particle_energy(packed, i, gravity);
+    springs_at(packed, i, |l| e += spring_energy(&packed.x, l));
+    e
+}
