@@ -149,6 +149,8 @@ pub(crate) struct Auditor {
     pub frame: EnergyAudit,
     /// The run so far.
     pub run: EnergyAudit,
+    /// The run's peak residual before the last frame.
+    pub peak_before: f64,
 }
 
 impl Auditor {
@@ -156,8 +158,9 @@ impl Auditor {
     pub fn prepare(&mut self, packed: &Packed) {
         self.blocks.clear();
         let m = packed.springs.len();
-        self.blocks
-            .extend((0..m.div_ceil(BLOCK)).map(|k| Block::Loose(k * BLOCK, ((k + 1) * BLOCK).min(m))));
+        self.blocks.extend(
+            (0..m.div_ceil(BLOCK)).map(|k| Block::Loose(k * BLOCK, ((k + 1) * BLOCK).min(m))),
+        );
         for (g, grid) in packed.topology.grids.iter().enumerate() {
             self.blocks.extend((0..grid.rows).map(|r| Block::Row(g, r)));
         }
@@ -165,8 +168,7 @@ impl Auditor {
         let slots = self.blocks.len().max(n.div_ceil(BLOCK));
         self.sums.resize(slots, 0.0);
         self.damped = packed.springs.iter().any(|s| s.damping != 0.0)
-            || (packed.topology.grids.iter())
-                .any(|g| g.links.iter().any(|l| l.damping != 0.0));
+            || (packed.topology.grids.iter()).any(|g| g.links.iter().any(|l| l.damping != 0.0));
         let keep = if self.damped { n } else { 0 };
         self.x0.resize(keep, DVec3::ZERO);
         self.v0.resize(keep, DVec3::ZERO);
@@ -213,7 +215,9 @@ impl Auditor {
         };
         let sums = &mut self.sums[..blocks.len()];
         if self.parallel {
-            sums.par_iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+            sums.par_iter_mut()
+                .enumerate()
+                .for_each(|(k, s)| *s = block(k));
         } else {
             sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
         }
@@ -225,7 +229,9 @@ impl Auditor {
         let block = |k: usize| (k * BLOCK..((k + 1) * BLOCK).min(n)).map(&f).sum::<f64>();
         let sums = &mut self.sums[..n.div_ceil(BLOCK)];
         if self.parallel {
-            sums.par_iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+            sums.par_iter_mut()
+                .enumerate()
+                .for_each(|(k, s)| *s = block(k));
         } else {
             sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
         }
@@ -234,7 +240,9 @@ impl Auditor {
 
     /// The cloth's mechanical energy `E` (J), in fixed order.
     pub fn energy(&mut self, packed: &Packed, gravity: DVec3) -> f64 {
-        let particles = self.particle_sum(packed.particle_count(), |i| particle_energy(packed, i, gravity));
+        let particles = self.particle_sum(packed.particle_count(), |i| {
+            particle_energy(packed, i, gravity)
+        });
         let x = &packed.x;
         let springs = self.spring_sum(packed, |l| spring_energy(x, l));
         particles + springs
@@ -283,6 +291,7 @@ impl Auditor {
                 start,
                 ..EnergyAudit::default()
             };
+            self.peak_before = 0.0;
         }
         self.frame = EnergyAudit {
             start,
@@ -299,10 +308,8 @@ impl Auditor {
         f.attachments = projections.attachments;
         f.contacts = projections.contacts;
         f.friction = projections.friction;
-        let unexplained = end - f.start - f.edits - f.attachments
-            + f.damping
-            + f.contacts
-            + f.friction;
+        let unexplained =
+            end - f.start - f.edits - f.attachments + f.damping + f.contacts + f.friction;
         if quarantined || !unexplained.is_finite() {
             f.quarantine = -unexplained;
         } else {
@@ -311,6 +318,7 @@ impl Auditor {
         self.run.lines_add(f);
         self.run.energy = end;
         self.run.scale = f.scale;
+        self.peak_before = self.run.peak_residual;
         self.run.peak_residual = self.run.peak_residual.max(self.run.residual);
         f.peak_residual = self.run.peak_residual;
         self.end = Some(end);
@@ -375,7 +383,14 @@ pub(crate) fn damper_loss(
 
 /// The loss of an isolated oscillator (`μ`, `κ`) over `h` from `(δ, δ̇)`, its step `lin`.
 #[inline]
-pub(crate) fn oscillator_loss(lin: &Linear, mu: f64, kappa: f64, h: f64, delta: f64, rate: f64) -> f64 {
+pub(crate) fn oscillator_loss(
+    lin: &Linear,
+    mu: f64,
+    kappa: f64,
+    h: f64,
+    delta: f64,
+    rate: f64,
+) -> f64 {
     let rate1 = rate + lin.phi(delta, rate);
     let delta1 = delta + h * rate + lin.r * delta + lin.s * rate;
     0.5 * mu * (rate * rate - rate1 * rate1) + 0.5 * kappa * (delta * delta - delta1 * delta1)

@@ -107,7 +107,9 @@ pub enum SimError {
     #[error("energy tolerance must be finite and > 0 (a share of the energy scale), got {0:?}")]
     BadTolerance(f64),
     /// `SimConfig::energy_limit` is not > 0.
-    #[error("energy limit must be > 0 (a share of the energy scale; infinite: not checked), got {0:?}")]
+    #[error(
+        "energy limit must be > 0 (a share of the energy scale; infinite: not checked), got {0:?}"
+    )]
     BadEnergyLimit(f64),
     /// A config asks for 0 substeps per frame.
     #[error("substeps must be ≥ 1")]

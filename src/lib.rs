@@ -59,6 +59,7 @@ pub mod math {
     #![doc = include_str!("integrate/MATH.md")]
 }
 
+pub use audit::EnergyAudit;
 pub use components::{
     ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
 };
@@ -67,7 +68,6 @@ pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
-pub use audit::EnergyAudit;
 pub use schedule::{Failure, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
 pub use step_control::StepChoice;

@@ -78,13 +78,13 @@ fn run_reports_a_blow_up_with_a_non_zero_exit() {
         harmonic(&args)
     };
     // The strain limit stops it while it is still finite ...
-    let out = run(&[]);
+    let out = run(&["--energy-limit", "inf"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains("run failed at frame"), "{stderr}");
     assert!(stderr.contains("strain limit"), "{stderr}");
     // ... and without it the state goes non-finite and is quarantined.
-    let out = run(&["--strain-limit", "inf"]);
+    let out = run(&["--strain-limit", "inf", "--energy-limit", "inf"]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(

@@ -26,10 +26,10 @@ pub struct ContactStage {
     pub(crate) gravity: DVec3,
     /// The positions before this substep's contact pass (the energy audit's spring terms).
     pub(super) pre: Vec<DVec3>,
-    /// The velocities at the substep's start (the drift a held particle books on its contact).
-    pub(super) v_start: Vec<DVec3>,
+    /// Per particle: the contact pass moved it this substep.
+    pub(super) touched: Vec<bool>,
     /// Per chunk: the energy its contacts and friction removed from the particles themselves,
-    /// and how many particles it pushed.
+    /// and whether it pushed any.
     pub(super) removed: Vec<[f64; 3]>,
     /// What the projections did to the cloth's energy this frame.
     pub(crate) energy: ProjectionLines,
@@ -87,7 +87,7 @@ impl ContactStage {
             stats: ContactStats::default(),
             gravity: DVec3::ZERO,
             pre: Vec::new(),
-            v_start: Vec::new(),
+            touched: Vec::new(),
             removed: Vec::new(),
             energy: ProjectionLines::default(),
         }
@@ -126,8 +126,6 @@ impl ContactStage {
             self.prev.extend_from_slice(&packed.x);
         }
         self.prev_valid = false;
-        self.v_start.clear();
-        self.v_start.extend_from_slice(&packed.v);
     }
 
     /// Particles moved between substeps by something other than this stage.
@@ -259,6 +257,8 @@ impl ContactStage {
         self.near.resize(chunks * nc, false);
         self.removed.clear();
         self.removed.resize(chunks, [0.0; 3]);
+        self.touched.clear();
+        self.touched.resize(packed.x.len(), false);
         self.pre.clear();
         self.pre.extend_from_slice(&packed.x);
         let g = self.gravity;
@@ -274,121 +274,115 @@ impl ContactStage {
         } else {
             1
         };
-        let v_start = &self.v_start[..];
         x.par_chunks_mut(CHUNK)
             .zip(v.par_chunks_mut(CHUNK))
             .zip(self.prev.par_chunks_mut(CHUNK))
             .zip(self.sums.par_chunks_mut(nc))
             .zip(self.near.par_chunks_mut(nc))
             .zip(self.removed.par_iter_mut())
+            .zip(self.touched.par_chunks_mut(CHUNK))
             .enumerate()
             .with_min_len(min_len)
-            .for_each(|(k, (((((xs, vs), prev), sums), near), removed))| {
-                // Broad phase, coarse: the colliders whose box meets the box of this chunk's
-                // paths (computed here, while the chunk is in cache).
-                let base = k * CHUNK;
-                let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
-                let mut lo = DVec3::splat(f64::INFINITY);
-                let mut hi = DVec3::splat(f64::NEG_INFINITY);
-                for (j, xi) in xs.iter().enumerate() {
-                    if free(j) {
-                        let x0 = prev[j];
-                        lo = lo.min(x0.min(*xi));
-                        hi = hi.max(x0.max(*xi));
+            .for_each(
+                |(k, ((((((xs, vs), prev), sums), near), removed), touched))| {
+                    // Broad phase, coarse: the colliders whose box meets the box of this chunk's
+                    // paths (computed here, while the chunk is in cache).
+                    let base = k * CHUNK;
+                    let free = |j: usize| inv_mass[base + j] != 0.0 && !held[base + j];
+                    let mut lo = DVec3::splat(f64::INFINITY);
+                    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+                    for (j, xi) in xs.iter().enumerate() {
+                        if free(j) {
+                            let x0 = prev[j];
+                            lo = lo.min(x0.min(*xi));
+                            hi = hi.max(x0.max(*xi));
+                        }
                     }
-                }
-                let mut any = false;
-                for (cand, n) in candidates.iter().zip(near.iter_mut()) {
-                    *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
-                    any |= *n;
-                }
-                if !any {
+                    let mut any = false;
+                    for (cand, n) in candidates.iter().zip(near.iter_mut()) {
+                        *n = lo.cmple(cand.hi).all() && hi.cmpge(cand.lo).all();
+                        any |= *n;
+                    }
+                    if !any {
+                        prev.copy_from_slice(xs);
+                        return;
+                    }
+                    for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
+                        let i = base + j;
+                        if !free(j) {
+                            continue;
+                        }
+                        let mut supported = false;
+                        for (ci, cand) in candidates.iter().enumerate() {
+                            if !near[ci] {
+                                continue;
+                            }
+                            let sum = &mut sums[ci];
+                            let (x0, x1) = (prev[j], *xi);
+                            // Broad phase, fine: this particle's path against this collider's box.
+                            if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
+                                continue;
+                            }
+                            // And against its bounding sphere: no point of the path comes closer
+                            // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
+                            // |x1 − x0| without a square root.
+                            let d = x1 - x0;
+                            let step = d.abs().element_sum();
+                            if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
+                                continue;
+                            }
+                            let fast = d.length_squared() > c.thickness * c.thickness;
+                            let (frame, t) = (&cand.frame, c.thickness);
+                            // The common primitives statically dispatched: parry's queries inline.
+                            let hit = match &cand.form {
+                                Form::Ball(b) => surface(b, frame, x0, x1, fast, t),
+                                Form::Cuboid(b) => surface(b, frame, x0, x1, fast, t),
+                                Form::Other => surface(cand.shape.as_ref(), frame, x0, x1, fast, t),
+                            };
+                            let Some(hit) = hit else {
+                                continue;
+                            };
+                            sum.contacts += 1;
+                            sum.max_depth = sum.max_depth.max(hit.depth);
+                            sum.swept += usize::from(hit.swept);
+                            if cand.dynamic && supported {
+                                support(&hit, x1, *vi, &c, cand, h, sum);
+                                continue;
+                            }
+                            supported |= !cand.dynamic;
+                            let (x_old, old) = (*xi, *vi);
+                            *xi = hit.point + hit.normal * c.thickness;
+                            touched[j] = true;
+                            removed[2] = 1.0;
+                            let m = 1.0 / inv_mass[i];
+                            // The push-out's change of the particle's own energy (its springs' are
+                            // booked after the pass).
+                            removed[0] += m * g.dot(*xi - x_old);
+                            let vb = cand.velocity_at(hit.point);
+                            let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
+                                continue;
+                            };
+                            *vi = vb + new;
+                            let n = hit.normal;
+                            let (u, u1) = (old - vb, new);
+                            let (ut, ut1) = (u - u.dot(n) * n, u1 - u1.dot(n) * n);
+                            let friction = 0.5 * m * (ut.length_squared() - ut1.length_squared());
+                            removed[0] +=
+                                0.5 * m * (old.length_squared() - vi.length_squared()) - friction;
+                            removed[1] += friction;
+                            if cand.dynamic {
+                                // The body gets −J at the contact point: force and torque.
+                                let j = (*vi - old) / inv_mass[i];
+                                sum.impulse -= j;
+                                sum.torque -= (hit.point - cand.com).cross(j);
+                            }
+                        }
+                    }
                     prev.copy_from_slice(xs);
-                    return;
-                }
-                for (j, (xi, vi)) in xs.iter_mut().zip(vs.iter_mut()).enumerate() {
-                    let i = base + j;
-                    if !free(j) {
-                        continue;
-                    }
-                    let mut supported = false;
-                    let mut held_here = false;
-                    for (ci, cand) in candidates.iter().enumerate() {
-                        if !near[ci] {
-                            continue;
-                        }
-                        let sum = &mut sums[ci];
-                        let (x0, x1) = (prev[j], *xi);
-                        // Broad phase, fine: this particle's path against this collider's box.
-                        if x0.min(x1).cmpgt(cand.hi).any() || x0.max(x1).cmplt(cand.lo).any() {
-                            continue;
-                        }
-                        // And against its bounding sphere: no point of the path comes closer
-                        // to the centre than |x1 − c| − |x1 − x0|, and the L1 length bounds
-                        // |x1 − x0| without a square root.
-                        let d = x1 - x0;
-                        let step = d.abs().element_sum();
-                        if x1.distance_squared(cand.centre) > (cand.reach + step).powi(2) {
-                            continue;
-                        }
-                        let fast = d.length_squared() > c.thickness * c.thickness;
-                        let (frame, t) = (&cand.frame, c.thickness);
-                        // The common primitives statically dispatched: parry's queries inline.
-                        let hit = match &cand.form {
-                            Form::Ball(b) => surface(b, frame, x0, x1, fast, t),
-                            Form::Cuboid(b) => surface(b, frame, x0, x1, fast, t),
-                            Form::Other => surface(cand.shape.as_ref(), frame, x0, x1, fast, t),
-                        };
-                        let Some(hit) = hit else {
-                            continue;
-                        };
-                        sum.contacts += 1;
-                        sum.max_depth = sum.max_depth.max(hit.depth);
-                        sum.swept += usize::from(hit.swept);
-                        if cand.dynamic && supported {
-                            support(&hit, x1, *vi, &c, cand, h, sum);
-                            continue;
-                        }
-                        supported |= !cand.dynamic;
-                        let (x_old, old) = (*xi, *vi);
-                        *xi = hit.point + hit.normal * c.thickness;
-                        let m = 1.0 / inv_mass[i];
-                        // The push-out's change of the particle's own energy (its springs' are
-                        // booked after the pass).
-                        removed[0] += m * g.dot(*xi - x_old);
-                        if !held_here && v_start.len() == inv_mass.len() {
-                            // The step's drift error under gravity, −m g·Δx + h m g·(v₀ + v₁)/2,
-                            // belongs to the contact that holds the particle: so a cloth at rest
-                            // books no residual.
-                            held_here = true;
-                            let drift = -m * g.dot(x_old - prev[j]) + 0.5 * h * m * g.dot(v_start[i] + old);
-                            removed[0] -= drift;
-                        }
-                        removed[2] += 1.0;
-                        let vb = cand.velocity_at(hit.point);
-                        let Some(new) = respond(old - vb, hit.normal, &c, cand) else {
-                            continue;
-                        };
-                        *vi = vb + new;
-                        let n = hit.normal;
-                        let (u, u1) = (old - vb, new);
-                        let (ut, ut1) = (u - u.dot(n) * n, u1 - u1.dot(n) * n);
-                        let friction = 0.5 * m * (ut.length_squared() - ut1.length_squared());
-                        let kinetic = 0.5 * m * (old.length_squared() - vi.length_squared());
-                        removed[0] += kinetic - friction;
-                        removed[1] += friction;
-                        if cand.dynamic {
-                            // The body gets −J at the contact point: force and torque.
-                            let j = (*vi - old) / inv_mass[i];
-                            sum.impulse -= j;
-                            sum.torque -= (hit.point - cand.com).cross(j);
-                        }
-                    }
-                }
-                prev.copy_from_slice(xs);
-            });
+                },
+            );
         self.prev_valid = true;
-        self.book_springs(packed);
+        self.book(packed);
         for (ci, cand) in self.candidates.iter().enumerate() {
             let mut total = Exchange::default();
             for s in self.sums.iter().skip(ci).step_by(nc) {
@@ -401,29 +395,25 @@ impl ContactStage {
 }
 
 impl ContactStage {
-    /// Books the contact pass's energy: what each chunk removed from its particles, and the
-    /// change of the springs at the particles it moved, each spring once (chunk order).
-    fn book_springs(&mut self, packed: &Packed) {
-        let (x, pre) = (&packed.x[..], &self.pre[..]);
-        let moved = |i: usize| x[i] != pre[i];
+    /// Books the contact pass's energy: the change it made, each chunk's to its particles,
+    /// then the change of the springs at the particles it moved, each spring once (in chunk
+    /// order).
+    fn book(&mut self, packed: &Packed) {
+        let (x, pre, moved) = (&packed.x[..], &self.pre[..], &self.touched);
         let mut springs = 0.0;
         for (k, r) in self.removed.iter().enumerate() {
-            self.energy.contacts += r[0];
-            self.energy.friction += r[1];
             if r[2] == 0.0 {
                 continue;
             }
-            for i in k * CHUNK..((k + 1) * CHUNK).min(x.len()) {
-                if !moved(i) {
-                    continue;
-                }
+            self.energy.contacts += r[0];
+            self.energy.friction += r[1];
+            for i in (k * CHUNK..((k + 1) * CHUNK).min(x.len())).filter(|&i| moved[i]) {
                 audit::springs_at(packed, i, |l| {
                     let other = if l.a == i { l.b } else { l.a };
-                    if moved(other) && other < i {
+                    if moved[other] && other < i {
                         return;
                     }
-                    let before = audit::spring_energy(pre, l);
-                    springs += audit::spring_energy(x, l) - before;
+                    springs += audit::spring_energy(x, l) - audit::spring_energy(pre, l);
                 });
             }
         }

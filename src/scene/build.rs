@@ -266,9 +266,7 @@ impl Scene {
                 strain_limit: self
                     .strain_limit
                     .unwrap_or(crate::config::DEFAULT_STRAIN_LIMIT),
-                tolerance: self
-                    .tolerance
-                    .unwrap_or(crate::config::DEFAULT_TOLERANCE),
+                tolerance: self.tolerance.unwrap_or(crate::config::DEFAULT_TOLERANCE),
                 energy_limit: self
                     .energy_limit
                     .unwrap_or(crate::config::DEFAULT_ENERGY_LIMIT),

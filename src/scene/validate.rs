@@ -146,7 +146,9 @@ impl Scene {
             if l.is_nan() || l <= 0.0 {
                 is.push(
                     "energy_limit",
-                    format!("must be > 0 (a share of the energy scale; inf: not checked), got {l:?}"),
+                    format!(
+                        "must be > 0 (a share of the energy scale; inf: not checked), got {l:?}"
+                    ),
                 );
             }
         }

@@ -10,6 +10,7 @@ use std::time::Instant;
 use clap::{Parser, Subcommand};
 
 mod progress;
+mod summary;
 use harmonic::scene::Limits;
 use harmonic::{Backend, Scene, SimError, Simulation};
 use progress::Progress;
@@ -160,6 +161,10 @@ struct RunArgs {
     /// blow-up (default 10; `inf`: not checked).
     #[arg(long)]
     strain_limit: Option<f64>,
+    /// Override the scene's energy limit: the peak energy residual, a share of the energy
+    /// scale, before the run fails (default 0.1; `inf`: not checked).
+    #[arg(long)]
+    energy_limit: Option<f64>,
     /// Record every M-th frame in the trajectory (step 0 always).
     #[arg(long, default_value_t = 1)]
     every: u64,
@@ -354,6 +359,9 @@ fn run(args: RunArgs) -> Result<(), String> {
     if let Some(l) = args.strain_limit {
         config.strain_limit = l;
     }
+    if let Some(l) = args.energy_limit {
+        config.energy_limit = l;
+    }
     let sim =
         Simulation::with_props(built.world, config, built.props).map_err(|e| e.to_string())?;
     let mut sim = sim;
@@ -528,19 +536,8 @@ fn run(args: RunArgs) -> Result<(), String> {
         100.0 * max_strain,
         100.0 * max_compression
     );
-    let scale = start.energy_scale;
-    let relative = if scale > 0.0 {
-        format!(
-            "{:+.3} % of the scene's energy scale, {scale:.4e} J",
-            100.0 * (end.energy - start.energy) / scale
-        )
-    } else {
-        "no energy scale: the scene starts at rest and unstretched, with nothing to fall".into()
-    };
-    println!(
-        "energy: start {:.6e} J, end {:.6e} J ({relative})",
-        start.energy, end.energy
-    );
+    println!("{}", summary::energy(&start, &end));
+    println!("{}", summary::audit(&end.audit));
     if let Some(bytes) = peak_rss() {
         println!(
             "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",

@@ -1,0 +1,46 @@
+//! The run summary's energy lines.
+
+use harmonic::{Diagnostics, EnergyAudit};
+
+/// The energy at the start and end, as a share of the scene's energy scale.
+pub fn energy(start: &Diagnostics, end: &Diagnostics) -> String {
+    let scale = start.energy_scale;
+    let relative = if scale > 0.0 {
+        format!(
+            "{:+.3} % of the scene's energy scale, {scale:.4e} J",
+            100.0 * (end.energy - start.energy) / scale
+        )
+    } else {
+        "no energy scale: the scene starts at rest and unstretched, with nothing to fall".into()
+    };
+    format!(
+        "energy: start {:.6e} J, end {:.6e} J ({relative})",
+        start.energy, end.energy
+    )
+}
+
+/// The run's energy books: the residual (the steps' own error) and each line.
+pub fn audit(a: &EnergyAudit) -> String {
+    let share = |j: f64| {
+        if a.scale > 0.0 {
+            format!(" ({:+.4} %)", 100.0 * j / a.scale)
+        } else {
+            String::new()
+        }
+    };
+    format!(
+        "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
+         damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, quarantine {:.4e} J; \
+         attachments put in {:.4e} J, edits {:.4e} J",
+        a.residual,
+        share(a.residual),
+        a.peak_residual,
+        share(a.peak_residual),
+        a.damping,
+        a.contacts,
+        a.friction,
+        a.quarantine,
+        a.attachments,
+        a.edits
+    )
+}
