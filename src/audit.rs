@@ -140,8 +140,11 @@ pub(crate) struct Auditor {
     /// The state at the current substep's start (scenes with dampers only).
     x0: Vec<DVec3>,
     v0: Vec<DVec3>,
-    /// Whether any spring has a damper.
+    /// Whether the pass after each substep has dampers to book: loose springs, or cloth
+    /// grids whose pass does not book its own.
     pub damped: bool,
+    /// The grids' dampers are booked by the grid pass.
+    grids_booked: bool,
     parallel: bool,
     /// `E` at the end of the last frame (None before the first).
     pub end: Option<f64>,
@@ -154,8 +157,10 @@ pub(crate) struct Auditor {
 }
 
 impl Auditor {
-    /// Sizes the blocks and scratch for the packed buffers (after every gather or repin).
-    pub fn prepare(&mut self, packed: &Packed) {
+    /// Sizes the blocks and scratch for the packed buffers (after every gather or repin);
+    /// `grids_booked`: the grid pass books its dampers itself.
+    pub fn prepare(&mut self, packed: &Packed, grids_booked: bool) {
+        self.grids_booked = grids_booked;
         self.blocks.clear();
         let m = packed.springs.len();
         self.blocks.extend(
@@ -177,6 +182,16 @@ impl Auditor {
 
     /// `Σ f` over every spring, in block order.
     fn spring_sum(&mut self, packed: &Packed, f: impl Fn(Link) -> f64 + Sync + Send) -> f64 {
+        self.spring_sum_of(packed, true, f)
+    }
+
+    /// As [`Self::spring_sum`], the cloth grids' springs only if `grids`.
+    fn spring_sum_of(
+        &mut self,
+        packed: &Packed,
+        grids_too: bool,
+        f: impl Fn(Link) -> f64 + Sync + Send,
+    ) -> f64 {
         let blocks = &self.blocks;
         let grids = &packed.topology.grids;
         let block = |k: usize| -> f64 {
@@ -193,6 +208,7 @@ impl Auditor {
                         });
                     }
                 }
+                Block::Row(_, _) if !grids_too => {}
                 Block::Row(g, r) => {
                     let grid = &grids[g];
                     for l in &grid.links {
@@ -257,14 +273,17 @@ impl Auditor {
     }
 
     /// What the dampers dissipated over the substep of `h` just taken (from the state
-    /// [`Self::begin_substep`] kept), booked on the frame.
-    pub fn damping(&mut self, packed: &Packed, law: DamperLaw, h: f64) {
+    /// [`Self::begin_substep`] kept), booked on the frame with `booked`, what the grid pass
+    /// booked itself.
+    pub fn damping(&mut self, packed: &Packed, law: DamperLaw, h: f64, booked: f64) {
+        self.frame.damping += booked;
         if !self.damped {
             return;
         }
         let (x0, v0) = (std::mem::take(&mut self.x0), std::mem::take(&mut self.v0));
         let (x1, v1, inv) = (&packed.x[..], &packed.v[..], &packed.inv_mass[..]);
-        let loss = self.spring_sum(packed, |l| {
+        let grids_too = !self.grids_booked;
+        let loss = self.spring_sum_of(packed, grids_too, |l| {
             if l.damping == 0.0 {
                 return 0.0;
             }

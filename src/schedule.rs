@@ -7,10 +7,13 @@ use std::time::Duration;
 pub struct StepStats {
     /// Re-gathering the World into packed buffers (about zero when not `gathered`).
     pub gather: Duration,
-    /// The substeps' integration, less the contact stage.
+    /// The substeps' integration, less the contact stage and the audit.
     pub integrate: Duration,
     /// The contact stage (zero without props).
     pub contacts: Duration,
+    /// The energy audit: the dampers' pass after each substep (damped scenes only) and the
+    /// energy at the frame's ends.
+    pub audit_time: Duration,
     /// The quarantine and writing the state back into the World.
     pub scatter: Duration,
     /// Whether this frame re-gathered the World.
@@ -125,6 +128,6 @@ impl std::fmt::Display for Failure {
 impl StepStats {
     /// Sum of the four stages' times.
     pub fn total(&self) -> Duration {
-        self.gather + self.integrate + self.contacts + self.scatter
+        self.gather + self.integrate + self.contacts + self.audit_time + self.scatter
     }
 }

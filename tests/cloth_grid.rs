@@ -126,6 +126,20 @@ fn grid_against_single(scene: &Scene, frames: usize, edit: impl Fn(World) -> Wor
         worst < 1e-10,
         "{what}: grid and single springs differ by {worst:e}"
     );
+    // The grid pass books its dampers' work in the pass, per particle; the single springs
+    // are booked spring by spring after each substep: the same discrete work.
+    let (dg, ds) = (grid.diagnostics().audit, single.diagnostics().audit);
+    assert!(ds.damping > 0.0, "{what}: {ds:?}");
+    assert!(
+        (dg.damping - ds.damping).abs() < 1e-9 * ds.damping,
+        "{what}: dampers booked {:e} on the grid, {:e} spring by spring",
+        dg.damping,
+        ds.damping
+    );
+    assert!(
+        (dg.residual - ds.residual).abs() < 1e-9 * ds.scale,
+        "{what}: {dg:?} {ds:?}"
+    );
 }
 
 #[test]

@@ -111,6 +111,21 @@ impl Solver {
         &self.lin
     }
 
+    /// Whether the grid pass books its dampers' loss itself ([`Self::grid_damper_loss`]).
+    pub fn grid_audits(&self) -> bool {
+        self.grid.audit
+    }
+
+    /// What the cloth grids' dampers dissipated in the last substep, when the grid pass books
+    /// it (Euler links; 0 otherwise).
+    pub fn grid_damper_loss(&self) -> f64 {
+        if self.grid.audit {
+            self.grid.damper_loss()
+        } else {
+            0.0
+        }
+    }
+
     /// Forgets the coefficients, so the next [`Self::prepare`] recomputes them (after a gather).
     pub fn invalidate(&mut self) {
         self.h = f64::NAN;

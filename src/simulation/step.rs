@@ -62,8 +62,9 @@ impl Simulation {
         let edited = self.dirty || !self.pins.is_empty() || self.state_edited;
         self.contained.clear();
         self.sync()?;
-        self.open_books(edited);
         let t1 = Instant::now();
+        self.open_books(edited);
+        let mut audit_time = t1.elapsed();
         let h = self.config.h();
         let substeps = self.config.substeps;
         let mut coupling = match (user, self.props.as_mut(), self.user_stage.as_mut()) {
@@ -114,13 +115,21 @@ impl Simulation {
                 }
             }
             let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
-            return self.finish_frame(t0, t1, gathered, contacts, None, (None, projections));
+            return self.finish_frame(
+                t0,
+                t1,
+                gathered,
+                (contacts, audit_time),
+                None,
+                (None, projections),
+            );
         }
         let (solver, packed) = (&mut self.solver, &mut self.packed);
         let (world, found) = (&self.world, &mut self.contained);
         let auditor = &mut self.auditor;
         let law = crate::audit::DamperLaw::of(self.config.integrator);
         let coupling_ref = &mut coupling;
+        let audit_out = &mut audit_time;
         let contacts_time = &mut contacts;
         // The strain check reads the frame's end state inside the same rayon job.
         let check = self.config.strain_limit.is_finite();
@@ -135,17 +144,25 @@ impl Simulation {
             (1..=substeps).try_for_each(|k| {
                 match coupling.as_mut() {
                     None => {
+                        let t = Instant::now();
                         auditor.begin_substep(packed);
+                        let t = t.elapsed();
                         solver.substep(packed, h)?;
-                        auditor.damping(packed, law, h);
+                        let u = Instant::now();
+                        auditor.damping(packed, law, h, solver.grid_damper_loss());
+                        *audit_out += t + u.elapsed();
                     }
                     Some(c) => {
                         let t = Instant::now();
                         c.begin_substep(packed);
                         *contacts_time += t.elapsed();
+                        let t = Instant::now();
                         auditor.begin_substep(packed);
+                        let t = t.elapsed();
                         solver.substep(packed, h)?;
-                        auditor.damping(packed, law, h);
+                        let u = Instant::now();
+                        auditor.damping(packed, law, h, solver.grid_damper_loss());
+                        *audit_out += t + u.elapsed();
                         let t = Instant::now();
                         c.substep(packed, h, k);
                         *contacts_time += t.elapsed();
@@ -161,7 +178,9 @@ impl Simulation {
             if check {
                 *beyond_out = Some(crate::metrics::beyond(packed, limit));
             }
+            let t = Instant::now();
             *end_out = Some(auditor.energy(packed, gravity));
+            *audit_out += t.elapsed();
             Ok::<(), SimError>(())
         };
         if self.parallel {
@@ -172,7 +191,14 @@ impl Simulation {
             integrate()?;
         }
         let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
-        self.finish_frame(t0, t1, gathered, contacts, beyond, (end, projections))
+        self.finish_frame(
+            t0,
+            t1,
+            gathered,
+            (contacts, audit_time),
+            beyond,
+            (end, projections),
+        )
     }
 
     /// Opens the frame's energy books: `E` after the edits (`edited`: the World, pins or the
@@ -193,7 +219,7 @@ impl Simulation {
         t0: Instant,
         t1: Instant,
         gathered: bool,
-        contacts: Duration,
+        (contacts, audit_time): (Duration, Duration),
         beyond: Option<bool>,
         (end, projections): (Option<f64>, crate::audit::ProjectionLines),
     ) -> Result<&StepStats, SimError> {
@@ -202,7 +228,9 @@ impl Simulation {
         self.steps += 1;
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
+        let t = Instant::now();
         let end = end.unwrap_or_else(|| self.auditor.energy(&self.packed, self.config.gravity));
+        let late = t.elapsed();
         self.auditor.end_frame(end, projections, quarantined > 0);
         self.packed.scatter(&mut self.world);
         let failure = self.check_strain(beyond).or_else(|| self.check_energy());
@@ -210,9 +238,10 @@ impl Simulation {
         let t3 = Instant::now();
         self.stats = StepStats {
             gather: t1 - t0,
-            integrate: (t2 - t1).saturating_sub(contacts),
+            integrate: (t2 - t1).saturating_sub(contacts + audit_time),
             contacts,
-            scatter: t3 - t2,
+            audit_time: audit_time + late,
+            scatter: (t3 - t2).saturating_sub(late),
             gathered,
             substeps: self.config.substeps,
             quarantined,
@@ -372,9 +401,10 @@ impl Simulation {
         }
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
-        self.auditor.prepare(&self.packed);
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
+        self.auditor
+            .prepare(&self.packed, self.solver.grid_audits());
         if let Some(p) = &mut self.props {
             if let Some(particle) = p.dangling(&self.world) {
                 return Err(SimError::DanglingAttachment { particle });

@@ -472,7 +472,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     let (mut max_strain, mut max_compression) = (start.max_strain, start.max_compression);
     let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
-    let (mut t_integrate, mut t_contacts) = (0.0, 0.0);
+    let (mut t_integrate, mut t_contacts, mut t_audit) = (0.0, 0.0, 0.0);
     let mut bar = Progress::new(steps);
     let t0 = Instant::now();
     let mut failure = None;
@@ -491,6 +491,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         bar.set(step, sim.time());
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
+        t_audit += sim.stats().audit_time.as_secs_f64();
         if let Some(p) = sim.props() {
             contacts += p.stats().contacts;
             max_depth = max_depth.max(p.stats().max_depth);
@@ -537,7 +538,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         100.0 * max_compression
     );
     println!("{}", summary::energy(&start, &end));
-    println!("{}", summary::audit(&end.audit));
+    println!("{}", summary::audit(&end.audit, t_audit, t_integrate));
     if let Some(bytes) = peak_rss() {
         println!(
             "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",

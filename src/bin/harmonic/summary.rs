@@ -20,7 +20,7 @@ pub fn energy(start: &Diagnostics, end: &Diagnostics) -> String {
 }
 
 /// The run's energy books: the residual (the steps' own error) and each line.
-pub fn audit(a: &EnergyAudit) -> String {
+pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     let share = |j: f64| {
         if a.scale > 0.0 {
             format!(" ({:+.4} %)", 100.0 * j / a.scale)
@@ -31,7 +31,8 @@ pub fn audit(a: &EnergyAudit) -> String {
     format!(
         "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
          damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, quarantine {:.4e} J; \
-         attachments put in {:.4e} J, edits {:.4e} J",
+         attachments put in {:.4e} J, edits {:.4e} J; the audit took {seconds:.3} s ({:.1} % of \
+         integrate)",
         a.residual,
         share(a.residual),
         a.peak_residual,
@@ -41,6 +42,7 @@ pub fn audit(a: &EnergyAudit) -> String {
         a.friction,
         a.quarantine,
         a.attachments,
-        a.edits
+        a.edits,
+        100.0 * seconds / integrate.max(1e-12)
     )
 }

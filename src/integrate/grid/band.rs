@@ -158,6 +158,7 @@ impl Ctx<'_> {
         let slot = |r: usize| (r % (reach + 1)) * cols;
         let first = r0.saturating_sub(reach);
         let last = (r1 + reach).min(rows);
+        let audit = self.shared.audit;
         let Band {
             above,
             below,
@@ -165,6 +166,10 @@ impl Ctx<'_> {
             v: ov,
             ring,
             f,
+            ring_d,
+            fd,
+            ones,
+            loss,
             ..
         } = b;
         let halo = Halo {
@@ -178,7 +183,7 @@ impl Ctx<'_> {
         for r in first..(first + reach + 1).min(last) {
             halo.hold(r, slot(r), [ox, ov], x, v);
         }
-        for s in ring.iter_mut() {
+        for s in ring.iter_mut().chain(ring_d.iter_mut()) {
             s.fill(0.0);
         }
         for a in first..r1 {
@@ -187,6 +192,11 @@ impl Ctx<'_> {
                 let s = slot(a + reach);
                 for k in ring.iter_mut() {
                     k[s..s + cols].fill(0.0);
+                }
+                if audit {
+                    for k in ring_d.iter_mut() {
+                        k[s..s + cols].fill(0.0);
+                    }
                 }
                 if a + reach < last {
                     halo.hold(a + reach, s, [ox, ov], x, v);
@@ -206,24 +216,34 @@ impl Ctx<'_> {
                 }
                 let n = hi - lo;
                 let (ka, kb) = (slot(a) + lo, slot(rb) + (lo as isize + dc) as usize);
-                link_row(
+                let (ea, eb) = (
                     [span(ox, ka, n), span(ov, ka, n)],
                     [span(ox, kb, n), span(ov, kb, n)],
-                    link.rest_length,
-                    l,
-                    f,
-                    n,
                 );
+                if audit {
+                    link_row::<true>(ea, eb, link.rest_length, l, [f, fd], n);
+                } else {
+                    link_row::<false>(ea, eb, link.rest_length, l, [f, fd], n);
+                }
                 // Force form (μ = 1): each end's change is −φ n / m at a, +φ n / m at b.
                 if own {
                     let ia = &self.inv[a * cols + lo..a * cols + hi];
                     add_scaled::<false>(ring, slot(a) + lo, ia, f, n);
+                    if audit {
+                        add_scaled::<false>(ring_d, slot(a) + lo, &ones[..n], fd, n);
+                    }
                 }
                 if in_band {
                     let cb = (lo as isize + dc) as usize;
                     let ib = &self.inv[rb * cols + cb..rb * cols + cb + n];
                     add_scaled::<true>(ring, slot(rb) + cb, ib, f, n);
+                    if audit {
+                        add_scaled::<true>(ring_d, slot(rb) + cb, &ones[..n], fd, n);
+                    }
                 }
+            }
+            if own && audit {
+                loss[a - r0] = 0.0;
             }
             if own {
                 let Shared {
@@ -241,7 +261,14 @@ impl Ctx<'_> {
                     if self.inv[i] != 0.0 {
                         let sum = DVec3::new(ring[0][s + c], ring[1][s + c], ring[2][s + c]);
                         let dv = sum + incidence.sum(sdv, self.grid.base as usize + i);
+                        let v0 = v[k];
                         (x[k], v[k]) = euler_move(update, x[k], v[k], dv, g, h);
+                        if audit {
+                            // The dampers' impulse on this particle does J·(v₀ + v₁)/2.
+                            let j =
+                                DVec3::new(ring_d[0][s + c], ring_d[1][s + c], ring_d[2][s + c]);
+                            loss[a - r0] -= 0.5 * j.dot(v0 + v[k]);
+                        }
                     }
                 }
             }
@@ -334,38 +361,39 @@ pub(super) fn add_chunk<const ADD: bool>(
 /// One link along a row: `f = φ n` of the springs from `a`'s columns to `b`'s, `n` of them,
 /// in chunks of `L`; a row's last, partial chunk is its last `L` springs (the overlap is
 /// computed twice, to the same values).
+/// With `DAMPERS`, the dampers' share `q δ̇ n` of each spring's `φ n` goes to `fd` too.
 #[inline(always)]
-pub(super) fn link_row(
+pub(super) fn link_row<const DAMPERS: bool>(
     a: [[&[f64]; 3]; 2],
     b: [[&[f64]; 3]; 2],
     rest: f64,
     l: &Linear,
-    f: &mut Soa3,
+    [f, fd]: [&mut Soa3; 2],
     n: usize,
 ) {
     if n < L {
-        link_chunk(&a, &b, rest, l, f, 0, n);
+        link_chunk::<DAMPERS>(&a, &b, rest, l, [f, fd], 0, n);
         return;
     }
     let mut k = 0;
     while k + L <= n {
-        link_chunk(&a, &b, rest, l, f, k, L);
+        link_chunk::<DAMPERS>(&a, &b, rest, l, [&mut *f, &mut *fd], k, L);
         k += L;
     }
     if k < n {
-        link_chunk(&a, &b, rest, l, f, n - L, L);
+        link_chunk::<DAMPERS>(&a, &b, rest, l, [f, fd], n - L, L);
     }
 }
 
 /// One chunk of [`link_row`]: `m` springs from `k`, each through [`axial`] and
 /// [`Linear::phi`], the math every pass shares (inlined, the lanes vectorise).
 #[inline(always)]
-pub(super) fn link_chunk(
+pub(super) fn link_chunk<const DAMPERS: bool>(
     a: &[[&[f64]; 3]; 2],
     b: &[[&[f64]; 3]; 2],
     rest: f64,
     l: &Linear,
-    f: &mut Soa3,
+    [f, fd]: [&mut Soa3; 2],
     k: usize,
     m: usize,
 ) {
@@ -376,6 +404,7 @@ pub(super) fn link_chunk(
     let (bx, by, bz) = (get(bx, k, m), get(by, k, m), get(bz, k, m));
     let (bvx, bvy, bvz) = (get(bvx, k, m), get(bvy, k, m), get(bvz, k, m));
     let (mut fx, mut fy, mut fz) = ([0.0; L], [0.0; L], [0.0; L]);
+    let (mut dx, mut dy, mut dz) = ([0.0; L], [0.0; L], [0.0; L]);
     for i in 0..L {
         let xa = DVec3::new(ax[i], ay[i], az[i]);
         let xb = DVec3::new(bx[i], by[i], bz[i]);
@@ -384,8 +413,17 @@ pub(super) fn link_chunk(
         let (n, delta, delta_dot) = axial(xa, xb, va, vb, rest);
         let fi = l.phi(delta, delta_dot) * n;
         (fx[i], fy[i], fz[i]) = (fi.x, fi.y, fi.z);
+        if DAMPERS {
+            let di = (l.q * delta_dot) * n;
+            (dx[i], dy[i], dz[i]) = (di.x, di.y, di.z);
+        }
     }
     put(&mut f[0], k, m, &fx);
     put(&mut f[1], k, m, &fy);
     put(&mut f[2], k, m, &fz);
+    if DAMPERS {
+        put(&mut fd[0], k, m, &dx);
+        put(&mut fd[1], k, m, &dy);
+        put(&mut fd[2], k, m, &dz);
+    }
 }

@@ -50,6 +50,13 @@ struct Band {
     ring: Soa3,
     /// One link's `φ n` along a row.
     f: Soa3,
+    /// With the audit: the dampers' impulses summed per particle over the same rows, one
+    /// link's damper impulse `q δ̇ n` along a row, a row of ones, and each of the band's rows'
+    /// damper loss this substep (their impulses' work over each particle's mean velocity).
+    ring_d: Soa3,
+    fd: Soa3,
+    ones: Vec<f64>,
+    loss: Vec<f64>,
 }
 
 /// A link's Euler coefficients for step `h` (p = −κ h, q = −c h), in force form (μ = 1): the
@@ -231,6 +238,8 @@ pub(crate) struct GridPass {
     /// their velocity changes for the current step.
     fixes: Vec<Fix>,
     fix_dv: Vec<(DVec3, DVec3)>,
+    /// Whether the pass books its dampers' loss ([`Self::damper_loss`]).
+    pub(crate) audit: bool,
 }
 
 fn soa(len: usize) -> Soa3 {
@@ -241,6 +250,11 @@ impl GridPass {
     /// Coefficients of `law` for step `h` and scratch for `packed`'s grids (`bands` per large
     /// grid).
     pub(crate) fn prepare(&mut self, packed: &Packed, h: f64, bands: usize, law: GridLaw) {
+        // Euler links book their dampers' work in the pass (the energy audit); the closed
+        // form's exact loss is booked after the substep.
+        let audit = law == GridLaw::Euler
+            && (packed.topology.grids.iter()).any(|g| g.links.iter().any(|l| l.damping != 0.0));
+        self.audit = audit;
         self.grids.clear();
         self.fixes.clear();
         self.vector = Vector::chosen();
@@ -270,6 +284,10 @@ impl GridPass {
                     v: soa((reach + 1) * cols),
                     ring: soa((reach + 1) * cols),
                     f: soa(cols),
+                    ring_d: soa(if audit { (reach + 1) * cols } else { 0 }),
+                    fd: soa(if audit { cols } else { 0 }),
+                    ones: vec![1.0; if audit { cols } else { 0 }],
+                    loss: vec![0.0; if audit { per.min(rows - r0) } else { 0 }],
                 })
                 .collect();
             self.grids.push((lin, bands));
@@ -320,6 +338,7 @@ impl GridPass {
             return;
         };
         let shared = Shared {
+            audit: self.audit,
             vector: self.vector,
             inv_mass,
             incidence,
@@ -345,8 +364,19 @@ impl GridPass {
     }
 }
 
+impl GridPass {
+    /// What the grids' dampers dissipated in the last substep, summed row by row in order,
+    /// so the same whatever the banding (0 unless [`Self::audit`]).
+    pub(crate) fn damper_loss(&self) -> f64 {
+        (self.grids.iter().flat_map(|(_, bands)| bands))
+            .flat_map(|b| &b.loss)
+            .sum()
+    }
+}
+
 /// What every grid of a pass shares.
 struct Shared<'a> {
+    audit: bool,
     vector: Vector,
     /// Every particle's inverse mass.
     inv_mass: &'a [f64],
