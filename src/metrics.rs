@@ -213,6 +213,35 @@ pub fn first_non_finite(packed: &Packed) -> Option<usize> {
 /// the particles' bounding box, the furthest a part of the scene can fall (a chain released
 /// horizontally swings down its length). One read of the state.
 pub fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
+    let (motion, fall) = energy_parts(packed, gravity);
+    motion.max(fall)
+}
+
+/// The energy in the cloth's own motion and stretch: `E_spring` plus the kinetic energy
+/// relative to the free particles' centre of mass (a cloth thrown whole has none).
+pub fn internal_energy(packed: &Packed) -> f64 {
+    let (mut mass, mut momentum, mut kinetic) = (0.0, DVec3::ZERO, 0.0);
+    for i in (0..packed.particle_count()).filter(|&i| packed.inv_mass[i] != 0.0) {
+        let m = packed.mass(i);
+        mass += m;
+        momentum += m * packed.v[i];
+        kinetic += 0.5 * m * packed.v[i].length_squared();
+    }
+    let bulk = if mass > 0.0 {
+        0.5 * momentum.length_squared() / mass
+    } else {
+        0.0
+    };
+    let spring: f64 = packed
+        .all_springs()
+        .map(|s| 0.5 * s.stiffness * packed.stretch(&s).powi(2))
+        .sum();
+    (kinetic - bulk).max(0.0) + spring
+}
+
+/// The two parts of [`energy_scale`]: the energy in motion and stretch, `E_kin + E_spring`,
+/// and what falling the scene's height would give, `M |g| H`.
+pub fn energy_parts(packed: &Packed, gravity: DVec3) -> (f64, f64) {
     let g = gravity.length();
     let (mut kinetic, mut mass) = (0.0, 0.0);
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
@@ -236,7 +265,7 @@ pub fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
     } else {
         0.0
     };
-    (kinetic + spring).max(mass * g * height)
+    (kinetic + spring, mass * g * height)
 }
 
 /// How many particles have a non-finite position or velocity.

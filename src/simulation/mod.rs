@@ -23,6 +23,7 @@ use crate::scene::{Limits, Scene};
 use crate::schedule::StepStats;
 use crate::step_control::{self, StepChoice};
 
+mod accuracy;
 mod coupling;
 mod edit;
 mod frame;
@@ -114,6 +115,10 @@ pub struct Simulation {
     energy_scale: f64,
     /// The energy audit's books and scratch.
     auditor: crate::audit::Auditor,
+    /// The automatic substeps' accuracy controller.
+    controller: accuracy::Controller,
+    /// [`metrics::internal_energy`] at the last World gather (the a priori substeps').
+    energy_in_motion: f64,
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -204,6 +209,8 @@ impl Simulation {
             failure: None,
             energy_scale: 0.0,
             auditor: Default::default(),
+            controller: Default::default(),
+            energy_in_motion: 0.0,
             choice: None,
             parallel: false,
             steps: 0,
@@ -346,6 +353,24 @@ impl Simulation {
             self.config.substeps = choice.substeps;
             choice
         });
+        if let Some(c) = &self.choice {
+            let residual = self.auditor.run.residual;
+            self.controller.reset(c.substeps, &self.packed, residual);
+            self.config.substeps = self.controller.a_priori(
+                c,
+                &self.config,
+                self.energy_in_motion / self.energy_scale,
+            );
+        }
+    }
+
+    /// The accuracy controller's record: how many times it changed the substeps, and the
+    /// last motion check's error per frame as a share of the scene's size (NaN before one).
+    pub fn accuracy(&self) -> (u32, f64) {
+        match self.choice {
+            Some(_) => (self.controller.changes, self.controller.motion),
+            None => (0, f64::NAN),
+        }
     }
 
     /// What automatic step control chose (None with fixed substeps).

@@ -65,6 +65,7 @@ impl Simulation {
         let t1 = Instant::now();
         self.open_books(edited);
         let mut audit_time = t1.elapsed();
+        let probed = self.probe_motion()?;
         let h = self.config.h();
         let substeps = self.config.substeps;
         let mut coupling = match (user, self.props.as_mut(), self.user_stage.as_mut()) {
@@ -198,7 +199,9 @@ impl Simulation {
             (contacts, audit_time),
             beyond,
             (end, projections),
-        )
+        )?;
+        self.adapt(probed);
+        Ok(&self.stats)
     }
 
     /// Opens the frame's energy books: `E` after the edits (`edited`: the World, pins or the
@@ -374,9 +377,10 @@ impl Simulation {
         // In place: the old buffers go before the new ones are made (never two copies), and
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
-        self.refresh()?;
-        self.energy_scale = crate::metrics::energy_scale(&self.packed, self.config.gravity);
-        Ok(())
+        let (motion, fall) = crate::metrics::energy_parts(&self.packed, self.config.gravity);
+        self.energy_scale = motion.max(fall);
+        self.energy_in_motion = crate::metrics::internal_energy(&self.packed);
+        self.refresh()
     }
 
     /// Everything after the buffers changed: the checks, the step choice, the solver's

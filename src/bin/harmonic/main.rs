@@ -473,6 +473,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let (mut max_strain, mut max_compression) = (start.max_strain, start.max_compression);
     let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
     let (mut t_integrate, mut t_contacts, mut t_audit) = (0.0, 0.0, 0.0);
+    let mut substeps_run = 0u64;
     let mut bar = Progress::new(steps);
     let t0 = Instant::now();
     let mut failure = None;
@@ -492,6 +493,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         t_integrate += sim.stats().integrate.as_secs_f64();
         t_contacts += sim.stats().contacts.as_secs_f64();
         t_audit += sim.stats().audit_time.as_secs_f64();
+        substeps_run += sim.stats().substeps as u64;
         if let Some(p) = sim.props() {
             contacts += p.stats().contacts;
             max_depth = max_depth.max(p.stats().max_depth);
@@ -516,7 +518,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     let done = sim.steps();
     let end = sim.diagnostics();
-    let substeps = done * config.substeps as u64;
+    let substeps = substeps_run;
     println!(
         "steps: {done} frame(s), {substeps} substep(s), {:.4} s simulated in {wall:.3} s wall ({:.0} steps/s, {:.1} M spring-substeps/s)",
         sim.time(),
@@ -539,6 +541,12 @@ fn run(args: RunArgs) -> Result<(), String> {
     );
     println!("{}", summary::energy(&start, &end));
     println!("{}", summary::audit(&end.audit, t_audit, t_integrate));
+    if let (Some(c), (changes, motion)) = (sim.step_choice(), sim.accuracy()) {
+        println!(
+            "{}",
+            summary::accuracy(c.substeps, sim.config().substeps, changes, motion)
+        );
+    }
     if let Some(bytes) = peak_rss() {
         println!(
             "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",

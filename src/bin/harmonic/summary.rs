@@ -46,3 +46,19 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
         100.0 * seconds / integrate.max(1e-12)
     )
 }
+
+/// What the accuracy controller made of the substeps.
+pub fn accuracy(floor: u32, now: u32, changes: u32, motion: f64) -> String {
+    let check = if motion.is_nan() {
+        "no motion check (bodies, or the GPU)".to_string()
+    } else {
+        format!(
+            "last motion check {:.3e} % of the scene's size per frame",
+            100.0 * motion
+        )
+    };
+    format!(
+        "accuracy: {now} substep(s) at the end ({floor} for stability; {changes} change(s) for the energy \
+         tolerance and the motion check); {check}"
+    )
+}

@@ -1,0 +1,195 @@
+//! Substeps chosen for accuracy: the automatic controller keeps the energy the steps make
+//! within [`SimConfig::tolerance`] of the energy scale, and the motion's error per frame within
+//! [`MOTION_TOLERANCE`] of the scene's size, adapting at frame boundaries. It reads only the
+//! state, so it decides the same on any number of threads.
+//!
+//! - The first frame's substeps are chosen a priori: a first-order step makes at most about
+//!   `ω h` times the energy in a mode of frequency `ω`, so with a share `f` of the energy scale
+//!   in the cloth's own motion and stretch at the start (kinetic energy about its centre of
+//!   mass, and the springs') the step is held to `ω_max h ≤ tol/(4 f)`, and never above the
+//!   stability floor ([`step_control::choose`]). A cloth starting at rest or thrown whole, and
+//!   unstretched, has no such energy and starts at the floor.
+//! - Up: when the cumulative residual has risen by more than a quarter of the tolerance above
+//!   its lowest since the last change, or the motion check finds a frame's error past its
+//!   bound, the substeps double. A bounded oscillation (symplectic Euler's) halves with them, so
+//!   the rises add up to at most half the tolerance; a drift (explicit Euler's) doubles them to
+//!   [`MAX_RAISE`] times the floor, past which the energy limit reports it. A fall is numerical
+//!   damping: reported, not controlled.
+//! - Down: after [`CALM_FRAMES`] frames in which the residual rose by less than 1/32 of the
+//!   tolerance and the last motion check within a quarter of its bound, they halve, never
+//!   below the stability floor.
+//! - The motion check, every [`CHECK_EVERY`] frames on scenes without bodies on the CPU, steps
+//!   the frame again from its start at twice the substeps and compares the positions: for a
+//!   first-order step the frame's own error is about twice their difference (step doubling).
+//!   It catches what the energy misses: a step that conserves energy but runs slow in phase,
+//!   or one that damps the motion away.
+
+use super::*;
+
+/// A frame's position error, as a share of the scene's size (its particles' bounding box
+/// diagonal), past which the motion check doubles the substeps.
+pub const MOTION_TOLERANCE: f64 = 1e-3;
+/// Frames between motion checks.
+pub const CHECK_EVERY: u64 = 30;
+/// Calm frames before the substeps may halve.
+pub const CALM_FRAMES: u64 = 120;
+/// The most the controller raises the substeps over the stability floor: a step whose error
+/// drifts (explicit Euler's energy) is not chased further; the energy limit reports it.
+pub const MAX_RAISE: u32 = 64;
+
+/// The controller's state between frames.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Controller {
+    /// The stability floor the substeps never go under.
+    floor: u32,
+    /// Frames since the last change; since then, the cumulative residual's lowest value and
+    /// its largest rise above an earlier low.
+    since: u64,
+    low: f64,
+    rise: f64,
+    /// The scene's size (m).
+    size: f64,
+    /// The last motion check's error, a share of the size (NaN before the first).
+    pub(super) motion: f64,
+    /// Substep changes made so far.
+    pub(super) changes: u32,
+    /// The start of a frame being checked, and where twice the substeps took it (f32: the
+    /// comparison needs far less than f64's precision).
+    start: (Vec<DVec3>, Vec<DVec3>),
+    probe: Vec<Vec3>,
+}
+
+impl Controller {
+    /// After a choice of the stability floor (every gather and pin refresh).
+    pub(super) fn reset(&mut self, floor: u32, packed: &Packed, residual: f64) {
+        self.floor = floor.max(1);
+        self.since = 0;
+        (self.low, self.rise) = (residual, 0.0);
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for x in &packed.x {
+            (lo, hi) = (lo.min(*x), hi.max(*x));
+        }
+        self.size = if packed.x.is_empty() {
+            0.0
+        } else {
+            (hi - lo).length()
+        };
+        self.motion = f64::NAN;
+    }
+}
+
+impl Controller {
+    /// The first frame's substeps for `choice` (the stability floor) and a share `f` of the
+    /// energy scale in motion and stretch, for the first-order explicit steps (the others'
+    /// error is damping, or the closed form's is not first order in `ω h`).
+    pub(super) fn a_priori(&self, choice: &StepChoice, config: &SimConfig, f: f64) -> u32 {
+        use crate::config::Integrator::*;
+        let first_order = matches!(config.integrator, SymplecticEuler | ExplicitEuler);
+        let positive = |x: f64| x > 0.0;
+        if !first_order || !positive(f) || !positive(choice.omega_max) {
+            return choice.substeps;
+        }
+        let bound = config.tolerance / (4.0 * f);
+        let wanted = (choice.omega_max * config.dt / bound).ceil();
+        let cap = step_control::MAX_SUBSTEPS as f64;
+        choice.substeps.max(wanted.min(cap) as u32)
+    }
+}
+
+impl Simulation {
+    /// Whether this frame is a motion check's: automatic substeps, the CPU, no bodies.
+    fn checks_motion(&self) -> bool {
+        #[cfg(feature = "gpu")]
+        if self.gpu.is_some() {
+            return false;
+        }
+        self.config.auto_substeps
+            && self.props.is_none()
+            && self.user_stage.is_none()
+            && self.steps.is_multiple_of(CHECK_EVERY)
+            && !self.packed.x.is_empty()
+    }
+
+    /// Before a frame: on a check frame, steps it at twice the substeps from its start and
+    /// keeps where that took the particles, then puts the start back.
+    pub(super) fn probe_motion(&mut self) -> Result<bool, SimError> {
+        if !self.checks_motion() {
+            return Ok(false);
+        }
+        let c = &mut self.controller;
+        let p = &mut self.packed;
+        c.start.0.clone_from(&p.x);
+        c.start.1.clone_from(&p.v);
+        let h = self.config.h() / 2.0;
+        let steps = 2 * self.config.substeps;
+        let run =
+            |solver: &mut Solver, p: &mut Packed| (0..steps).try_for_each(|_| solver.substep(p, h));
+        let result = if self.parallel {
+            rayon::scope(|_| run(&mut self.solver, p))
+        } else {
+            run(&mut self.solver, p)
+        };
+        c.probe.clear();
+        c.probe.extend(p.x.iter().map(|x| x.as_vec3()));
+        p.x.clone_from(&c.start.0);
+        p.v.clone_from(&c.start.1);
+        // Back to the frame's own step.
+        self.solver.prepare(p, self.config.h())?;
+        result?;
+        Ok(true)
+    }
+
+    /// After a frame's books: the substeps for the next frame.
+    pub(super) fn adapt(&mut self, probed: bool) {
+        if !self.config.auto_substeps {
+            return;
+        }
+        let run = self.auditor.run;
+        let tol = self.config.tolerance * run.scale;
+        let c = &mut self.controller;
+        if probed {
+            let worst = (self.packed.x.iter().zip(&c.probe))
+                .zip(&self.packed.inv_mass)
+                .filter(|(_, &w)| w != 0.0)
+                .map(|((x, q), _)| (x.as_vec3() - *q).length() as f64)
+                .fold(0.0, f64::max);
+            // A first-order step: the frame's error is about twice the difference.
+            c.motion = if c.size > 0.0 {
+                2.0 * worst / c.size
+            } else {
+                0.0
+            };
+        }
+        c.since += 1;
+        c.low = c.low.min(run.residual);
+        // A rise, not a fall: a steady loss (numerical damping, the step's error at particles
+        // a contact holds) is not the steps making energy.
+        c.rise = c.rise.max(run.residual - c.low);
+        let substeps = self.config.substeps;
+        let energy_up = tol > 0.0 && c.rise > 0.25 * tol;
+        // A NaN error (the probe blew up) counts as past the bound.
+        let motion_up = probed && (c.motion > MOTION_TOLERANCE || c.motion.is_nan());
+        let calm = c.since >= CALM_FRAMES
+            && (tol <= 0.0 || c.rise < tol / 32.0)
+            && c.motion <= MOTION_TOLERANCE / 4.0;
+        let next = if energy_up || motion_up {
+            (substeps.saturating_mul(2))
+                .min(c.floor.saturating_mul(MAX_RAISE))
+                .min(step_control::MAX_SUBSTEPS)
+                .max(substeps)
+        } else if calm && substeps / 2 >= c.floor {
+            substeps / 2
+        } else {
+            substeps
+        };
+        if next != substeps {
+            self.config.substeps = next;
+            c.changes += 1;
+            c.since = 0;
+            (c.low, c.rise) = (run.residual, 0.0);
+            if calm {
+                c.motion = f64::NAN;
+            }
+        }
+    }
+}
