@@ -16,6 +16,10 @@ pub mod buffers {
 pub mod integrate {
     pub use crate::integrate::*;
 }
+/// The energy audit's books over packed buffers.
+pub mod audit {
+    pub use crate::audit::{Auditor, DamperLaw, ProjectionLines};
+}
 /// Diagnostics over packed buffers.
 pub mod metrics {
     pub use crate::metrics::*;

@@ -356,11 +356,14 @@ impl Simulation {
         if let Some(c) = &self.choice {
             let residual = self.auditor.run.residual;
             self.controller.reset(c.substeps, &self.packed, residual);
-            self.config.substeps = self.controller.a_priori(
-                c,
-                &self.config,
-                self.energy_in_motion / self.energy_scale,
-            );
+            // The first frame's a priori; later choices start at the floor and adapt.
+            if self.steps == 0 {
+                self.config.substeps = self.controller.a_priori(
+                    c,
+                    &self.config,
+                    self.energy_in_motion / self.energy_scale,
+                );
+            }
         }
     }
 

@@ -215,6 +215,8 @@ pub fn measure(
                         max_strain: strain,
                         static_strain,
                         energy_drift: f64::NAN,
+                        residual: f64::NAN,
+                        peak_residual: f64::NAN,
                         stable,
                         edge: false,
                     });

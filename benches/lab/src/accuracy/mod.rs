@@ -166,29 +166,48 @@ pub struct Row {
     pub max_strain: f64,
     pub static_strain: f64,
     pub energy_drift: f64,
+    /// The energy audit's residual at the end and its peak, shares of the energy scale.
+    pub residual: f64,
+    pub peak_residual: f64,
     pub stable: bool,
     /// Found by bisecting toward the cheapest step within the default rule, not a ladder step.
     pub edge: bool,
 }
 
-/// Positions at `T` after `steps` steps; `None` if it blew up. Also max strain and energy drift.
+/// What a run of [`simulate`] ends with: positions at `T`, max strain, energy drift, and the
+/// energy audit's residual and peak residual (the drift and residuals as shares of `e_ref`).
+pub type Outcome = (Vec<DVec3>, f64, f64, (f64, f64));
+
+/// Positions at `T` after `steps` steps; `None` if it blew up. Also max strain, energy drift
+/// and the energy audit's books (booked as the engine books them, every 8th step a "frame").
 pub fn simulate(
     packed: &Packed,
     integrator: Integrator,
     g: DVec3,
     steps: u64,
     e_ref: f64,
-) -> Option<(Vec<DVec3>, f64, f64)> {
+) -> Option<Outcome> {
+    use harmonic::internals::audit::{Auditor, DamperLaw};
     let h = T / steps as f64;
     let mut p = packed.clone();
     let mut solver = Solver::new(integrator, false, g);
     solver.prepare(&p, h).ok()?;
     let e0 = metrics::energy(&p, g);
+    let mut books = Auditor::default();
+    books.prepare(&p, solver.grid_audits());
+    let law = DamperLaw::of(integrator);
+    let start = books.energy(&p, g);
+    books.begin_frame(start, e_ref);
     let mut max_strain = metrics::max_strain(&p);
     for step in 1..=steps {
+        books.begin_substep(&p);
         solver.substep(&mut p, h).ok()?;
+        books.damping(&p, law, h, solver.grid_damper_loss());
         // Strain every 8th step (and the last): a full pass costs as much as a step.
         if step % 8 == 0 || step == steps {
+            let e = books.energy(&p, g);
+            books.end_frame(e, Default::default(), false);
+            books.begin_frame(e, e_ref);
             let strain = metrics::max_strain(&p);
             if strain.is_nan() || strain > stability::BLOWUP_STRAIN {
                 return None;
@@ -196,11 +215,13 @@ pub fn simulate(
             max_strain = max_strain.max(strain);
         }
     }
+    let run = books.run;
     metrics::first_non_finite(&p).is_none().then(|| {
         (
             p.x.clone(),
             max_strain,
             (metrics::energy(&p, g) - e0) / e_ref,
+            (run.residual / e_ref, run.peak_residual / e_ref),
         )
     })
 }
@@ -257,9 +278,10 @@ impl Runner<'_> {
     /// when stable.
     fn run(&self, integrator: Integrator, steps: u64, repeats: u32) -> Row {
         let outcome = simulate(self.on(integrator), integrator, self.g, steps, self.e_ref);
-        let (rms_error, max_strain, energy_drift, stable) = match outcome {
-            Some((x, s, e)) => (rms(&x, self.reference), s, e, true),
-            None => (f64::NAN, f64::NAN, f64::NAN, false),
+        let (rms_error, max_strain, energy_drift, (residual, peak_residual), stable) = match outcome
+        {
+            Some((x, s, e, r)) => (rms(&x, self.reference), s, e, r, true),
+            None => (f64::NAN, f64::NAN, f64::NAN, (f64::NAN, f64::NAN), false),
         };
         let mut row = Row {
             scene: self.scene,
@@ -271,6 +293,8 @@ impl Runner<'_> {
             max_strain,
             static_strain: self.static_strain,
             energy_drift,
+            residual,
+            peak_residual,
             stable,
             edge: false,
         };
@@ -322,7 +346,7 @@ pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64, f64) {
     let a = simulate(packed, Integrator::Rk4, g, n, 1.0)
         .expect("RK4 reference is stable")
         .0;
-    let (b, max_strain, _) =
+    let (b, max_strain, _, _) =
         simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).expect("RK4 reference is stable");
     let change = rms(&a, &b);
     (b, 2 * n, change, max_strain)
@@ -430,6 +454,8 @@ mod tests {
             max_strain,
             static_strain: 0.0,
             energy_drift: 0.0,
+            residual: 0.0,
+            peak_residual: 0.0,
             stable,
             edge: false,
         }

@@ -3,11 +3,11 @@
 use super::*;
 
 pub fn csv(rows: &[Row]) -> String {
-    let mut out = String::from("scene,integrator,steps_per_s,h_over_hc,wall_s_per_sim_s,rms_error_m,max_strain,static_strain,energy_drift,stable,edge\n");
+    let mut out = String::from("scene,integrator,steps_per_s,h_over_hc,wall_s_per_sim_s,rms_error_m,max_strain,static_strain,energy_drift,stable,edge,residual,peak_residual\n");
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.scene,
             r.integrator,
             r.steps,
@@ -18,7 +18,9 @@ pub fn csv(rows: &[Row]) -> String {
             r.static_strain,
             r.energy_drift,
             r.stable,
-            r.edge
+            r.edge,
+            r.residual,
+            r.peak_residual
         );
     }
     out
@@ -122,13 +124,13 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
             }
         }
         frontier(&mut out, rows, scene, reference.max_strain);
-        let _ = writeln!(out, "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | static strain | energy drift | stable |");
-        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|");
+        let _ = writeln!(out, "| integrator | steps/s | h/h_c | wall s per sim. s | RMS error (m) | max strain | static strain | energy drift | residual (peak) | stable |");
+        let _ = writeln!(out, "|---|---|---|---|---|---|---|---|---|---|");
         for r in rows.iter().filter(|r| r.scene == scene) {
             if r.stable {
                 let _ = writeln!(
                     out,
-                    "| {} | {} | {:.3} | {:.4} | {:.3e} | {:.4} | {:.4} | {:+.2e} | yes |",
+                    "| {} | {} | {:.3} | {:.4} | {:.3e} | {:.4} | {:.4} | {:+.2e} | {:+.2e} ({:.2e}) | yes |",
                     r.integrator,
                     steps_cell(r),
                     r.step_ratio,
@@ -136,12 +138,14 @@ pub fn markdown(rows: &[Row], refs: &[Reference]) -> String {
                     r.rms_error,
                     r.max_strain,
                     r.static_strain,
-                    r.energy_drift
+                    r.energy_drift,
+                    r.residual,
+                    r.peak_residual
                 );
             } else {
                 let _ = writeln!(
                     out,
-                    "| {} | {} | {:.3} | - | - | - | {:.4} | - | no |",
+                    "| {} | {} | {:.3} | - | - | - | {:.4} | - | - | no |",
                     r.integrator,
                     steps_cell(r),
                     r.step_ratio,
