@@ -182,8 +182,10 @@ impl Auditor {
         let n = packed.particle_count();
         let slots = self.blocks.len().max(n.div_ceil(BLOCK));
         self.sums.resize(slots, 0.0);
-        self.damped = packed.springs.iter().any(|s| s.damping != 0.0)
-            || (packed.topology.grids.iter()).any(|g| g.links.iter().any(|l| l.damping != 0.0));
+        let damped_grids =
+            (packed.topology.grids.iter()).any(|g| g.links.iter().any(|l| l.damping != 0.0));
+        self.damped =
+            packed.springs.iter().any(|s| s.damping != 0.0) || (damped_grids && !grids_booked);
         let keep = if self.damped { n } else { 0 };
         self.x0.resize(keep, DVec3::ZERO);
         self.v0.resize(keep, DVec3::ZERO);
