@@ -29,7 +29,7 @@ pub struct ContactStage {
     /// Per particle: the contact pass moved it this substep.
     pub(super) touched: Vec<bool>,
     /// Per chunk: the energy its contacts and friction removed from the particles themselves,
-    /// and whether it pushed any.
+    /// and whether it pushed any (then, after the pass, its springs' change).
     pub(super) removed: Vec<[f64; 3]>,
     /// What the projections did to the cloth's energy this frame.
     pub(crate) energy: ProjectionLines,
@@ -399,14 +399,9 @@ impl ContactStage {
     /// then the change of the springs at the particles it moved, each spring once (in chunk
     /// order).
     fn book(&mut self, packed: &Packed) {
-        let (x, pre, moved) = (&packed.x[..], &self.pre[..], &self.touched);
-        let mut springs = 0.0;
-        for (k, r) in self.removed.iter().enumerate() {
-            if r[2] == 0.0 {
-                continue;
-            }
-            self.energy.contacts += r[0];
-            self.energy.friction += r[1];
+        let (x, pre, moved) = (&packed.x[..], &self.pre[..], &self.touched[..]);
+        let chunk = |k: usize| {
+            let mut springs = 0.0;
             for i in (k * CHUNK..((k + 1) * CHUNK).min(x.len())).filter(|&i| moved[i]) {
                 audit::springs_at(packed, i, |l| {
                     let other = if l.a == i { l.b } else { l.a };
@@ -416,8 +411,28 @@ impl ContactStage {
                     springs += audit::spring_energy(x, l) - audit::spring_energy(pre, l);
                 });
             }
+            springs
+        };
+        // Each chunk's springs on its own thread (the state is only read), summed in order.
+        let min_len = if x.len() < crate::integrate::par::PAR_MIN {
+            usize::MAX
+        } else {
+            1
+        };
+        self.removed
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(min_len)
+            .filter(|(_, r)| r[2] != 0.0)
+            .for_each(|(k, r)| r[2] = chunk(k));
+        for r in self
+            .removed
+            .iter()
+            .filter(|r| r[2] != 0.0 || r[0] != 0.0 || r[1] != 0.0)
+        {
+            self.energy.contacts += r[0] - r[2];
+            self.energy.friction += r[1];
         }
-        self.energy.contacts -= springs;
     }
 }
 
