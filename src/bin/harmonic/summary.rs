@@ -31,8 +31,8 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     format!(
         "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
          damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, quarantine {:.4e} J; \
-         attachments put in {:.4e} J, edits {:.4e} J; the audit took {seconds:.3} s ({:.1} % of \
-         integrate)",
+         attachments put in {:.4e} J, edits {:.4e} J; its passes took {seconds:.3} s ({:.1} % of \
+         integrate, where the grid pass books its dampers)",
         a.residual,
         share(a.residual),
         a.peak_residual,
