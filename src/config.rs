@@ -218,6 +218,11 @@ pub struct SimConfig {
     pub gravity: DVec3,
     /// The integrator every substep uses.
     pub integrator: Integrator,
+    /// Choose `integrator` from the springs at load (a scene that names none): the cheaper
+    /// within the tolerance of symplectic Euler and the closed form by their stability floors
+    /// at the scene's damping (`step_control::choose_integrator`);
+    /// [`crate::Simulation::integrator_choice`] says why.
+    pub auto_integrator: bool,
     /// Harmonic only: move positions by each spring's closed-form displacement too.
     pub exact_displacement: bool,
     /// Where the integrate stage runs.
@@ -252,6 +257,7 @@ impl Default for SimConfig {
             auto_substeps: true,
             gravity: DVec3::new(0.0, -9.81, 0.0),
             integrator: Integrator::default(),
+            auto_integrator: false,
             exact_displacement: false,
             backend: Backend::Cpu,
             strain_limit: DEFAULT_STRAIN_LIMIT,

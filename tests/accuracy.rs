@@ -145,3 +145,39 @@ fn the_controller_decides_the_same_on_one_and_two_threads() {
     };
     assert_eq!(run(1), run(2));
 }
+
+#[test]
+fn a_scene_naming_no_integrator_gets_the_cheaper_with_its_reason() {
+    // A cloth at ζ = 3: the closed form's floor is only ~1.3× lower on a network, within its
+    // cost margin (NOTES.md, "The integrator chosen"): symplectic Euler.
+    let cloth = r#"Scene(dt: 0.016666666666666666,
+        cloths: [(origin: (0.0, 1.0, 0.0), size: (1.0, 1.0), resolution: (16, 16),
+                  plane: Vertical, mass: 1.0,
+                  structural: (frequency: 60.0, damping_ratio: 3.0),
+                  shear: Some((frequency: 60.0, damping_ratio: 3.0)), pins: [TopLeft, TopRight])])"#;
+    let sim = Simulation::from_scene(&Scene::parse(cloth, "c").unwrap()).unwrap();
+    assert_eq!(sim.config().integrator, Integrator::SymplecticEuler);
+    assert!(
+        sim.integrator_choice().unwrap().contains("ζ = 3.000"),
+        "{:?}",
+        sim.integrator_choice()
+    );
+    // One heavily over-damped spring: the closed form is exact for it, but its automatic
+    // substeps keep to the stability limits measured on networks (step_control.rs), which
+    // are within the margin of symplectic Euler's at every damping: symplectic Euler again.
+    let pair = r#"Scene(dt: 0.016666666666666666, gravity: (0.0, 0.0, 0.0),
+        particles: [(position: (0.0, 0.0, 0.0), mass: 1.0, pinned: true),
+                    (position: (1.3, 0.0, 0.0), mass: 1.0)],
+        springs: [(a: 0, b: 1, stiffness: 1e4, damping_ratio: 10.0, rest_length: 1.0)])"#;
+    let sim = Simulation::from_scene(&Scene::parse(pair, "p").unwrap()).unwrap();
+    assert_eq!(sim.config().integrator, Integrator::SymplecticEuler);
+    assert!(sim
+        .integrator_choice()
+        .unwrap()
+        .contains("within its cost margin"));
+    // Named, it is kept and no reason is given.
+    let named = cloth.replace("Scene(dt", "Scene(integrator: \"harmonic\", dt");
+    let sim = Simulation::from_scene(&Scene::parse(&named, "n").unwrap()).unwrap();
+    assert_eq!(sim.config().integrator, Integrator::Harmonic);
+    assert_eq!(sim.integrator_choice(), None);
+}

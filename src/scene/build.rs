@@ -257,6 +257,7 @@ impl Scene {
                 auto_substeps: self.substeps.is_none(),
                 gravity: self.gravity.into(),
                 integrator,
+                auto_integrator: self.integrator.is_none(),
                 exact_displacement: self.exact_displacement,
                 backend: self
                     .backend

@@ -119,6 +119,8 @@ pub struct Simulation {
     controller: accuracy::Controller,
     /// [`metrics::internal_energy`] at the last World gather (the a priori substeps').
     energy_in_motion: f64,
+    /// Why the integrator was chosen, when the config left it to the springs.
+    integrator_reason: Option<String>,
 }
 
 /// A cloth of the simulation (from its scene or added at run time), to remove it by.
@@ -193,6 +195,13 @@ impl Simulation {
         if props.is_some() {
             config.backend = props_backend(config.backend);
         }
+        let mut integrator_reason = None;
+        if config.auto_integrator {
+            let packed = Packed::gather(&world)?;
+            let (integrator, why) = step_control::choose_integrator(&packed, config.dt);
+            config.integrator = integrator;
+            integrator_reason = Some(why);
+        }
         let mut sim = Self {
             world,
             config,
@@ -211,6 +220,7 @@ impl Simulation {
             auditor: Default::default(),
             controller: Default::default(),
             energy_in_motion: 0.0,
+            integrator_reason,
             choice: None,
             parallel: false,
             steps: 0,
@@ -374,6 +384,11 @@ impl Simulation {
             Some(_) => (self.controller.changes, self.controller.motion),
             None => (0, f64::NAN),
         }
+    }
+
+    /// Why the integrator is the one it is, when [`SimConfig::auto_integrator`] chose it.
+    pub fn integrator_choice(&self) -> Option<&str> {
+        self.integrator_reason.as_deref()
     }
 
     /// What automatic step control chose (None with fixed substeps).

@@ -351,6 +351,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     if let Some(name) = &args.integrator {
         config.integrator = name.parse().map_err(|e: SimError| e.to_string())?;
+        config.auto_integrator = false;
     }
     if let Some(name) = &args.backend {
         config.backend = name.parse().map_err(|e: SimError| e.to_string())?;
@@ -407,6 +408,9 @@ fn run(args: RunArgs) -> Result<(), String> {
         config.substeps,
         config.h()
     );
+    if let Some(why) = sim.integrator_choice() {
+        println!("integrator chosen: {why} (the scene names none)");
+    }
     if let Some(c) = sim.step_choice() {
         let limit = c.limit.map_or("no stability limit".to_string(), |l| {
             let why = if config.integrator == harmonic::Integrator::Xpbd {
