@@ -234,6 +234,13 @@ pub struct SimConfig {
     /// The energy the steps may make, as a share of the energy scale: the automatic substeps
     /// keep the run's peak residual ([`crate::EnergyAudit::peak_residual`]) within it (1 %).
     pub tolerance: f64,
+    /// Wall time one step may take (s; infinite: no budget). With automatic substeps the
+    /// controller then halves the substeps of a step over it (never under the stability floor)
+    /// and raises them for accuracy only while twice the step fits; a step the budget kept
+    /// under what the tolerance asked says so ([`crate::StepStats::budget_limited`]), and the
+    /// audit's peak residual how far it went. It reads the wall clock, so a budgeted run is
+    /// not deterministic.
+    pub step_budget: f64,
     /// The peak residual, as a share of the energy scale, past which a frame is reported as a
     /// [`crate::Failure::Energy`] (10 × the default tolerance); infinite to not check.
     pub energy_limit: f64,
@@ -262,6 +269,7 @@ impl Default for SimConfig {
             backend: Backend::Cpu,
             strain_limit: DEFAULT_STRAIN_LIMIT,
             tolerance: DEFAULT_TOLERANCE,
+            step_budget: f64::INFINITY,
             energy_limit: DEFAULT_ENERGY_LIMIT,
         }
     }
@@ -284,6 +292,9 @@ impl SimConfig {
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
             return Err(SimError::BadTolerance(self.tolerance));
+        }
+        if self.step_budget.is_nan() || self.step_budget <= 0.0 {
+            return Err(SimError::BadStepBudget(self.step_budget));
         }
         if self.energy_limit.is_nan() || self.energy_limit <= 0.0 {
             return Err(SimError::BadEnergyLimit(self.energy_limit));

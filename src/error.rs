@@ -106,6 +106,9 @@ pub enum SimError {
     /// `SimConfig::tolerance` is not finite and > 0.
     #[error("energy tolerance must be finite and > 0 (a share of the energy scale), got {0:?}")]
     BadTolerance(f64),
+    /// `SimConfig::step_budget` is not > 0.
+    #[error("step budget must be > 0 s (infinite: none), got {0:?}")]
+    BadStepBudget(f64),
     /// `SimConfig::energy_limit` is not > 0.
     #[error(
         "energy limit must be > 0 (a share of the energy scale; infinite: not checked), got {0:?}"

@@ -27,6 +27,9 @@ pub struct StepStats {
     pub failure: Option<Failure>,
     /// The frame's energy books ([`crate::EnergyAudit`]).
     pub audit: crate::EnergyAudit,
+    /// [`crate::SimConfig::step_budget`] kept the next step's substeps under what the
+    /// tolerance asked (or this step was over the budget at the stability floor).
+    pub budget_limited: bool,
 }
 
 /// A frame whose state is finite but wrong: the engine reports it, never as success.

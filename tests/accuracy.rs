@@ -181,3 +181,38 @@ fn a_scene_naming_no_integrator_gets_the_cheaper_with_its_reason() {
     assert_eq!(sim.config().integrator, Integrator::Harmonic);
     assert_eq!(sim.integrator_choice(), None);
 }
+
+#[test]
+fn a_step_budget_holds_the_substeps_and_says_when_it_costs_accuracy() {
+    let run = |budget: f64| {
+        let scene = Scene::parse(&chain(1.0 / 60.0), "b").unwrap();
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        let mut config = *sim.config();
+        config.step_budget = budget;
+        sim.set_config(config).unwrap();
+        let floor = sim.config().substeps;
+        let mut limited = 0;
+        let mut most = 0;
+        for _ in 0..600 {
+            let s = *sim.step().unwrap();
+            limited += usize::from(s.budget_limited);
+            most = most.max(s.substeps);
+        }
+        (floor, most, limited, sim.diagnostics().audit)
+    };
+    // A budget no step meets: the substeps stay at the stability floor, and the steps that
+    // wanted more say so; the audit shows the tolerance passed.
+    let (floor, most, limited, books) = run(1e-9);
+    assert_eq!(most, floor);
+    assert!(limited > 0);
+    assert!(books.relative_peak() > 0.01, "{books:?}");
+    // A budget every step meets: the controller as without one.
+    let (_, most_free, limited, books) = run(10.0);
+    assert!(most_free > 8 * floor && limited == 0);
+    assert!(books.relative_peak() <= 0.01, "{books:?}");
+    let bad = SimConfig {
+        step_budget: 0.0,
+        ..SimConfig::default()
+    };
+    assert!(Simulation::new(harmonic::hecs::World::new(), bad).is_err());
+}

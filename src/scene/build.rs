@@ -268,6 +268,7 @@ impl Scene {
                     .strain_limit
                     .unwrap_or(crate::config::DEFAULT_STRAIN_LIMIT),
                 tolerance: self.tolerance.unwrap_or(crate::config::DEFAULT_TOLERANCE),
+                step_budget: f64::INFINITY,
                 energy_limit: self
                     .energy_limit
                     .unwrap_or(crate::config::DEFAULT_ENERGY_LIMIT),

@@ -172,7 +172,7 @@ impl Simulation {
         let calm = c.since >= CALM_FRAMES
             && (tol <= 0.0 || c.rise < tol / 32.0)
             && c.motion <= MOTION_TOLERANCE / 4.0;
-        let next = if energy_up || motion_up {
+        let mut next = if energy_up || motion_up {
             (substeps.saturating_mul(2))
                 .min(c.floor.saturating_mul(MAX_RAISE))
                 .min(step_control::MAX_SUBSTEPS)
@@ -182,6 +182,19 @@ impl Simulation {
         } else {
             substeps
         };
+        // The budget, from the wall clock: over it, halve toward the floor; raise only while
+        // twice the step fits.
+        let budget = self.config.step_budget;
+        if budget.is_finite() {
+            let spent = self.stats.total().as_secs_f64();
+            let wanted = next;
+            if spent > budget {
+                next = (substeps / 2).max(c.floor);
+            } else if next > substeps && 2.0 * spent > budget {
+                next = substeps;
+            }
+            self.stats.budget_limited = next < wanted || (spent > budget && substeps == c.floor);
+        }
         if next != substeps {
             self.config.substeps = next;
             c.changes += 1;

@@ -250,6 +250,7 @@ impl Simulation {
             quarantined,
             failure,
             audit: self.auditor.frame,
+            budget_limited: false,
         };
         Ok(&self.stats)
     }
