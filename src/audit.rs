@@ -10,7 +10,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::buffers::Packed;
+use crate::buffers::{Packed, PackedSpring};
 use crate::config::Integrator;
 
 /// Elements per block of the audit's fixed-order sums.
@@ -134,6 +134,31 @@ pub(crate) struct Link {
     pub damping: f64,
 }
 
+impl From<&PackedSpring> for Link {
+    fn from(s: &PackedSpring) -> Self {
+        Link {
+            a: s.a as usize,
+            b: s.b as usize,
+            rest: s.rest,
+            stiffness: s.stiffness,
+            damping: s.damping,
+        }
+    }
+}
+
+/// `sums[k] = block(k)` for every block (on rayon's pool when `parallel`), then their sum in
+/// block order: the same whatever the thread count.
+fn fixed_sum(sums: &mut [f64], parallel: bool, block: impl Fn(usize) -> f64 + Sync) -> f64 {
+    if parallel {
+        sums.par_iter_mut()
+            .enumerate()
+            .for_each(|(k, s)| *s = block(k));
+    } else {
+        sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
+    }
+    sums.iter().sum()
+}
+
 /// A block of the fixed-order sums over springs.
 #[derive(Clone, Copy, Debug)]
 enum Block {
@@ -211,13 +236,7 @@ impl Auditor {
             match blocks[k] {
                 Block::Loose(lo, hi) => {
                     for s in &packed.springs[lo..hi] {
-                        acc += f(Link {
-                            a: s.a as usize,
-                            b: s.b as usize,
-                            rest: s.rest,
-                            stiffness: s.stiffness,
-                            damping: s.damping,
-                        });
+                        acc += f(s.into());
                     }
                 }
                 Block::Row(_, _) if !grids_too => {}
@@ -241,29 +260,13 @@ impl Auditor {
             }
             acc
         };
-        let sums = &mut self.sums[..blocks.len()];
-        if self.parallel {
-            sums.par_iter_mut()
-                .enumerate()
-                .for_each(|(k, s)| *s = block(k));
-        } else {
-            sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
-        }
-        sums.iter().sum()
+        fixed_sum(&mut self.sums[..blocks.len()], self.parallel, block)
     }
 
     /// `Σ f(i)` over every particle, in block order.
     fn particle_sum(&mut self, n: usize, f: impl Fn(usize) -> f64 + Sync + Send) -> f64 {
         let block = |k: usize| (k * BLOCK..((k + 1) * BLOCK).min(n)).map(&f).sum::<f64>();
-        let sums = &mut self.sums[..n.div_ceil(BLOCK)];
-        if self.parallel {
-            sums.par_iter_mut()
-                .enumerate()
-                .for_each(|(k, s)| *s = block(k));
-        } else {
-            sums.iter_mut().enumerate().for_each(|(k, s)| *s = block(k));
-        }
-        sums.iter().sum()
+        fixed_sum(&mut self.sums[..n.div_ceil(BLOCK)], self.parallel, block)
     }
 
     /// The cloth's mechanical energy `E` (J), in fixed order.
@@ -406,14 +409,7 @@ pub(crate) fn damper_loss(
 /// a grid's by its links both ways).
 pub(crate) fn springs_at(packed: &Packed, i: usize, mut f: impl FnMut(Link)) {
     for &k in packed.topology.touching(i) {
-        let s = &packed.springs[k as usize];
-        f(Link {
-            a: s.a as usize,
-            b: s.b as usize,
-            rest: s.rest,
-            stiffness: s.stiffness,
-            damping: s.damping,
-        });
+        f((&packed.springs[k as usize]).into());
     }
     for g in &packed.topology.grids {
         if !g.range().contains(&i) {

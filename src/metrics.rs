@@ -12,19 +12,11 @@ use crate::integrate::par::PAR_MIN;
 
 /// Kinetic + spring + gravitational potential energy (J); pinned particles hold none.
 /// Gravity's potential is `−m g·x`, zero at the origin.
+/// The terms are the energy audit's (`audit::particle_energy`, `audit::spring_energy`); this sum
+/// is the quick one, in whatever order rayon splits it (the audit's is in fixed order).
 pub fn energy(packed: &Packed, gravity: DVec3) -> f64 {
-    let particle = |i: usize| {
-        if packed.inv_mass[i] == 0.0 {
-            0.0
-        } else {
-            let m = packed.mass(i);
-            0.5 * m * packed.v[i].length_squared() - m * gravity.dot(packed.x[i])
-        }
-    };
-    let spring = |s: PackedSpring| {
-        let d = packed.stretch(&s);
-        0.5 * s.stiffness * d * d
-    };
+    let particle = |i: usize| crate::audit::particle_energy(packed, i, gravity);
+    let spring = |s: PackedSpring| crate::audit::spring_energy(&packed.x, (&s).into());
     let (n, m) = (packed.particle_count(), packed.spring_count());
     if n + m < PAR_MIN {
         (0..n).map(particle).sum::<f64>() + packed.all_springs().map(spring).sum::<f64>()
@@ -213,59 +205,66 @@ pub fn first_non_finite(packed: &Packed) -> Option<usize> {
 /// the particles' bounding box, the furthest a part of the scene can fall (a chain released
 /// horizontally swings down its length). One read of the state.
 pub fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
-    let (motion, fall) = energy_parts(packed, gravity);
-    motion.max(fall)
+    energy_parts(packed, gravity).scale()
 }
 
-/// The energy in the cloth's own motion and stretch: `E_spring` plus the kinetic energy
-/// relative to the free particles' centre of mass (a cloth thrown whole has none).
-pub fn internal_energy(packed: &Packed) -> f64 {
-    let (mut mass, mut momentum, mut kinetic) = (0.0, DVec3::ZERO, 0.0);
-    for i in (0..packed.particle_count()).filter(|&i| packed.inv_mass[i] != 0.0) {
-        let m = packed.mass(i);
-        mass += m;
-        momentum += m * packed.v[i];
-        kinetic += 0.5 * m * packed.v[i].length_squared();
+/// The parts of the state's energy the scale and the a priori substeps are taken from.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EnergyParts {
+    /// Kinetic energy of the free particles, and of their centre of mass's motion.
+    pub kinetic: f64,
+    pub bulk: f64,
+    /// The springs' energy.
+    pub spring: f64,
+    /// What falling the scene's height would give, `M |g| H`.
+    pub fall: f64,
+}
+
+impl EnergyParts {
+    /// [`energy_scale`].
+    pub fn scale(&self) -> f64 {
+        (self.kinetic + self.spring).max(self.fall)
     }
-    let bulk = if mass > 0.0 {
-        0.5 * momentum.length_squared() / mass
-    } else {
-        0.0
-    };
-    let spring: f64 = packed
-        .all_springs()
-        .map(|s| 0.5 * s.stiffness * packed.stretch(&s).powi(2))
-        .sum();
-    (kinetic - bulk).max(0.0) + spring
+
+    /// The energy in the cloth's own motion and stretch: the springs' plus the kinetic energy
+    /// about the centre of mass (a cloth thrown whole has none).
+    pub fn internal(&self) -> f64 {
+        (self.kinetic - self.bulk).max(0.0) + self.spring
+    }
 }
 
-/// The two parts of [`energy_scale`]: the energy in motion and stretch, `E_kin + E_spring`,
-/// and what falling the scene's height would give, `M |g| H`.
-pub fn energy_parts(packed: &Packed, gravity: DVec3) -> (f64, f64) {
-    let g = gravity.length();
-    let (mut kinetic, mut mass) = (0.0, 0.0);
+/// [`EnergyParts`] of the state, in one read of the particles and one of the springs.
+pub fn energy_parts(packed: &Packed, gravity: DVec3) -> EnergyParts {
+    let (mut kinetic, mut mass, mut momentum) = (0.0, 0.0, DVec3::ZERO);
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
     for i in 0..packed.particle_count() {
         (lo, hi) = (lo.min(packed.x[i]), hi.max(packed.x[i]));
         if packed.inv_mass[i] != 0.0 {
             let m = packed.mass(i);
             mass += m;
+            momentum += m * packed.v[i];
             kinetic += 0.5 * m * packed.v[i].length_squared();
         }
     }
     let spring: f64 = packed
         .all_springs()
-        .map(|s| {
-            let d = packed.stretch(&s);
-            0.5 * s.stiffness * d * d
-        })
+        .map(|s| crate::audit::spring_energy(&packed.x, (&s).into()))
         .sum();
     let height = if packed.particle_count() > 0 {
         (hi - lo).length()
     } else {
         0.0
     };
-    (kinetic + spring, mass * g * height)
+    EnergyParts {
+        kinetic,
+        bulk: if mass > 0.0 {
+            0.5 * momentum.length_squared() / mass
+        } else {
+            0.0
+        },
+        spring,
+        fall: mass * gravity.length() * height,
+    }
 }
 
 /// How many particles have a non-finite position or velocity.

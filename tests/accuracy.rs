@@ -4,6 +4,8 @@
 //! state, not the audit's books); damped shipped scenes keep their substeps; the controller
 //! decides the same on one and two threads.
 
+mod common;
+
 use harmonic::prelude::*;
 
 fn chain(dt: f64) -> String {
@@ -105,11 +107,7 @@ fn the_motion_check_measures_each_frame_against_twice_the_substeps() {
 fn the_controller_decides_the_same_on_one_and_two_threads() {
     let text = chain(1.0 / 60.0);
     let run = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::on_threads(threads, || {
             let mut sim = Simulation::from_scene(&Scene::parse(&text, "d").unwrap()).unwrap();
             let substeps: Vec<u32> = (0..300).map(|_| sim.step().unwrap().substeps).collect();
             (substeps, sim.positions().to_vec())
@@ -125,11 +123,7 @@ fn the_controller_decides_the_same_on_one_and_two_threads() {
     // frames: the same bits.
     let scene = harmonic::internals::hanging_cloth(72);
     let run = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::on_threads(threads, || {
             let mut sim = Simulation::from_scene(&Scene {
                 substeps: None,
                 ..scene.clone()

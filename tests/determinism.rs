@@ -7,11 +7,7 @@ use harmonic::prelude::*;
 
 /// The state after `frames` frames of `scene`, stepped on a pool of `threads` threads.
 fn state_on(threads: usize, scene: &Scene, frames: usize) -> Vec<DVec3> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    pool.install(|| {
+    common::on_threads(threads, || {
         let mut sim = Simulation::from_scene(scene).unwrap();
         common::run_state(&mut sim, frames)
     })

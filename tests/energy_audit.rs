@@ -197,11 +197,7 @@ fn energy_made_past_the_limit_is_a_failure() {
 fn the_books_are_the_same_on_one_and_two_threads() {
     let text = harmonic::internals::hanging_cloth(72);
     let books = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
+        common::on_threads(threads, || {
             let mut sim = Simulation::from_scene(&text).unwrap();
             run(&mut sim, 5).last().copied().unwrap()
         })

@@ -18,6 +18,15 @@ impl Issues {
             self.push(location, format!("must be finite and > 0, got {v:?}"));
         }
     }
+    /// A limit: > 0, infinite for none; `unit` says what it is a share of, if anything.
+    fn limit(&mut self, location: &str, v: Option<f64>, unit: &str) {
+        if let Some(l) = v.filter(|l| l.is_nan() || *l <= 0.0) {
+            self.push(
+                location,
+                format!("must be > 0 ({unit}inf: not checked), got {l:?}"),
+            );
+        }
+    }
     fn non_negative(&mut self, location: impl Into<String>, v: f64) {
         if !(v.is_finite() && v >= 0.0) {
             self.push(location, format!("must be finite and ≥ 0, got {v:?}"));
@@ -126,14 +135,7 @@ impl Scene {
                 );
             }
         }
-        if let Some(l) = self.strain_limit {
-            if l.is_nan() || l <= 0.0 {
-                is.push(
-                    "strain_limit",
-                    format!("must be > 0 (inf: not checked), got {l:?}"),
-                );
-            }
-        }
+        is.limit("strain_limit", self.strain_limit, "");
         if let Some(t) = self.tolerance {
             if !(t.is_finite() && t > 0.0) {
                 is.push(
@@ -142,16 +144,11 @@ impl Scene {
                 );
             }
         }
-        if let Some(l) = self.energy_limit {
-            if l.is_nan() || l <= 0.0 {
-                is.push(
-                    "energy_limit",
-                    format!(
-                        "must be > 0 (a share of the energy scale; inf: not checked), got {l:?}"
-                    ),
-                );
-            }
-        }
+        is.limit(
+            "energy_limit",
+            self.energy_limit,
+            "a share of the energy scale; ",
+        );
         if let Some(t) = self.seconds {
             // How many frames that is, is checked where a run takes its length from it
             // (`Limits::frames`, `harmonic run`): a scene stepped by a game has no end.

@@ -57,6 +57,8 @@ pub(super) struct Controller {
     /// comparison needs far less than f64's precision).
     start: (Vec<DVec3>, Vec<DVec3>),
     probe: Vec<Vec3>,
+    /// The check's own solver, prepared for half the step once (the frame's keeps its own).
+    solver: Option<Solver>,
 }
 
 impl Controller {
@@ -75,6 +77,9 @@ impl Controller {
             (hi - lo).length()
         };
         self.motion = f64::NAN;
+        if let Some(s) = &mut self.solver {
+            s.invalidate();
+        }
     }
 }
 

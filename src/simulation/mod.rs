@@ -117,7 +117,7 @@ pub struct Simulation {
     auditor: crate::audit::Auditor,
     /// The automatic substeps' accuracy controller.
     controller: accuracy::Controller,
-    /// [`metrics::internal_energy`] at the last World gather (the a priori substeps').
+    /// [`metrics::EnergyParts::internal`] at the last World gather (the a priori substeps').
     energy_in_motion: f64,
     /// Why the integrator was chosen, when the config left it to the springs.
     integrator_reason: Option<String>,

@@ -143,31 +143,22 @@ impl Simulation {
         let integrate = move || {
             let coupling = coupling_ref;
             (1..=substeps).try_for_each(|k| {
-                match coupling.as_mut() {
-                    None => {
-                        let t = Instant::now();
-                        auditor.begin_substep(packed);
-                        let t = t.elapsed();
-                        solver.substep(packed, h)?;
-                        let u = Instant::now();
-                        auditor.damping(packed, law, h, solver.grid_damper_loss());
-                        *audit_out += t + u.elapsed();
-                    }
-                    Some(c) => {
-                        let t = Instant::now();
-                        c.begin_substep(packed);
-                        *contacts_time += t.elapsed();
-                        let t = Instant::now();
-                        auditor.begin_substep(packed);
-                        let t = t.elapsed();
-                        solver.substep(packed, h)?;
-                        let u = Instant::now();
-                        auditor.damping(packed, law, h, solver.grid_damper_loss());
-                        *audit_out += t + u.elapsed();
-                        let t = Instant::now();
-                        c.substep(packed, h, k);
-                        *contacts_time += t.elapsed();
-                    }
+                if let Some(c) = coupling.as_mut() {
+                    let t = Instant::now();
+                    c.begin_substep(packed);
+                    *contacts_time += t.elapsed();
+                }
+                let t = Instant::now();
+                auditor.begin_substep(packed);
+                let t = t.elapsed();
+                solver.substep(packed, h)?;
+                let u = Instant::now();
+                auditor.damping(packed, law, h, solver.grid_damper_loss());
+                *audit_out += t + u.elapsed();
+                if let Some(c) = coupling.as_mut() {
+                    let t = Instant::now();
+                    c.substep(packed, h, k);
+                    *contacts_time += t.elapsed();
                 }
                 if contain(packed, world, found) {
                     if let Some(c) = coupling.as_mut() {
@@ -378,9 +369,9 @@ impl Simulation {
         // In place: the old buffers go before the new ones are made (never two copies), and
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
-        let (motion, fall) = crate::metrics::energy_parts(&self.packed, self.config.gravity);
-        self.energy_scale = motion.max(fall);
-        self.energy_in_motion = crate::metrics::internal_energy(&self.packed);
+        let parts = crate::metrics::energy_parts(&self.packed, self.config.gravity);
+        self.energy_scale = parts.scale();
+        self.energy_in_motion = parts.internal();
         self.refresh()
     }
 

@@ -175,3 +175,12 @@ pub fn repo_root() -> std::path::PathBuf {
         .unwrap_or(here)
         .to_path_buf()
 }
+
+/// `f` run on a rayon pool of `threads` threads.
+pub fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("a thread pool")
+        .install(f)
+}

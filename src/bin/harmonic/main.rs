@@ -1,8 +1,7 @@
 //! `harmonic`: run, check and render scenes, headless. The measuring apparatus (speed against
 //! error, the stability suite, throughput, the rapier peer, the GPU bench) is `harmonic-lab`.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::Write;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -11,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 mod progress;
 mod summary;
+mod trajectory;
 use harmonic::scene::Limits;
 use harmonic::{Backend, Scene, SimError, Simulation};
 use progress::Progress;
@@ -373,13 +373,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let steps = frames(args.steps, args.seconds, scene.seconds, config.dt, &limits)?;
 
     let mut traj = match &args.trajectory {
-        Some(path) => {
-            let f = File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;
-            let mut w = BufWriter::new(f);
-            writeln!(w, "step,time,particle,x,y,z,vx,vy,vz").map_err(|e| e.to_string())?;
-            write_rows(&mut w, &sim, 0).map_err(|e| e.to_string())?;
-            Some(w)
-        }
+        Some(path) => Some(trajectory::create(path, &sim)?),
         None => None,
     };
 
@@ -508,7 +502,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         max_compression = max_compression.max(stretch.compression);
         if let Some(w) = traj.as_mut() {
             if step % args.every == 0 {
-                write_rows(w, &sim, step).map_err(|e| e.to_string())?;
+                trajectory::write_rows(w, &sim, step).map_err(|e| e.to_string())?;
             }
         }
         if sim.stats().failure.is_some() {
@@ -551,7 +545,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             summary::accuracy(c.substeps, sim.config().substeps, changes, motion)
         );
     }
-    if let Some(bytes) = peak_rss() {
+    if let Some(bytes) = summary::peak_rss() {
         println!(
             "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",
             bytes as f64 / (1 << 20) as f64,
@@ -586,24 +580,4 @@ fn run(args: RunArgs) -> Result<(), String> {
             Ok(())
         }
     }
-}
-
-/// The process's peak resident set (Linux's VmHWM), in bytes.
-fn peak_rss() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
-
-fn write_rows(w: &mut impl Write, sim: &Simulation, step: u64) -> std::io::Result<()> {
-    let t = step as f64 * sim.config().dt;
-    for (i, (x, v)) in sim.positions().iter().zip(sim.velocities()).enumerate() {
-        writeln!(
-            w,
-            "{step},{t},{i},{},{},{},{},{},{}",
-            x.x, x.y, x.z, v.x, v.y, v.z
-        )?;
-    }
-    Ok(())
 }

@@ -62,3 +62,11 @@ pub fn accuracy(floor: u32, now: u32, changes: u32, motion: f64) -> String {
          tolerance and the motion check); {check}"
     )
 }
+
+/// The process's peak resident set (Linux's VmHWM), in bytes.
+pub fn peak_rss() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
