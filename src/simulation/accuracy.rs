@@ -23,6 +23,11 @@
 //!   first-order step the frame's own error is about twice their difference (step doubling).
 //!   It catches what the energy misses: a step that conserves energy but runs slow in phase,
 //!   or one that damps the motion away.
+//! - Retry: on the CPU without bodies or a step budget, a frame whose own energy error would lift the
+//!   cumulative residual more than half the tolerance above its low is taken again from its
+//!   start at twice the substeps, until it fits or the substeps reach their cap. A long frame
+//!   (several periods of the cloth's motion) is thus held to the tolerance before its books
+//!   close, not one frame late.
 
 use super::*;
 
@@ -51,7 +56,7 @@ pub(super) struct Controller {
     size: f64,
     /// The last motion check's error, a share of the size (NaN before the first).
     pub(super) motion: f64,
-    /// Substep changes made so far.
+    /// Substep changes made so far (a frame taken again included).
     pub(super) changes: u32,
     /// The start of a frame being checked, and where twice the substeps took it (f32: the
     /// comparison needs far less than f64's precision).
@@ -209,5 +214,41 @@ impl Simulation {
                 c.motion = f64::NAN;
             }
         }
+    }
+}
+
+impl Controller {
+    /// Keeps the frame's start, for [`Self::rejects`] (frames that may be retried only).
+    pub(super) fn keep_start(&mut self, packed: &Packed) {
+        self.start.0.clone_from(&packed.x);
+        self.start.1.clone_from(&packed.v);
+    }
+
+    /// Puts the frame's start back.
+    pub(super) fn restore_start(&self, packed: &mut Packed) {
+        packed.x.copy_from_slice(&self.start.0);
+        packed.v.copy_from_slice(&self.start.1);
+    }
+
+    /// Whether a frame taken at `substeps` is rejected and taken again at the substeps
+    /// returned: its books would leave the cumulative residual at `after`, more than half
+    /// the tolerance `tol` (J) above its lowest since the last change, and the substeps may
+    /// still double. The run's residual before the frame, `before`, becomes the new low.
+    pub(super) fn rejects(
+        &mut self,
+        substeps: u32,
+        before: f64,
+        after: f64,
+        tol: f64,
+    ) -> Option<u32> {
+        let cap = (self.floor.saturating_mul(MAX_RAISE)).min(step_control::MAX_SUBSTEPS);
+        let rise = after - self.low.min(before);
+        if !(tol > 0.0 && rise > 0.5 * tol) || substeps.saturating_mul(2) > cap {
+            return None;
+        }
+        self.changes += 1;
+        self.since = 0;
+        (self.low, self.rise) = (before, 0.0);
+        Some(substeps * 2)
     }
 }

@@ -125,6 +125,18 @@ impl Simulation {
                 (None, projections),
             );
         }
+        // A frame the accuracy controller may take again: automatic substeps, no step budget
+        // (the wall clock has the last word there), nothing outside the cloth (bodies) that a
+        // retry would have to wind back.
+        let retry =
+            self.config.auto_substeps && !self.config.step_budget.is_finite() && coupling.is_none();
+        if retry {
+            self.controller.keep_start(&self.packed);
+        }
+        let tol = self.config.tolerance * self.energy_scale;
+        let mut substeps = substeps;
+        let substeps_out = &mut substeps;
+        let controller = &mut self.controller;
         let (solver, packed) = (&mut self.solver, &mut self.packed);
         let (world, found) = (&self.world, &mut self.contained);
         let auditor = &mut self.auditor;
@@ -138,41 +150,61 @@ impl Simulation {
         let mut beyond = None;
         let beyond_out = &mut beyond;
         let gravity = self.config.gravity;
+        let dt = self.config.dt;
         let mut end = None;
         let end_out = &mut end;
         let integrate = move || {
             let coupling = coupling_ref;
-            (1..=substeps).try_for_each(|k| {
-                if let Some(c) = coupling.as_mut() {
-                    let t = Instant::now();
-                    c.begin_substep(packed);
-                    *contacts_time += t.elapsed();
-                }
-                let t = Instant::now();
-                auditor.begin_substep(packed);
-                let t = t.elapsed();
-                solver.substep(packed, h)?;
-                let u = Instant::now();
-                auditor.damping(packed, law, h, solver.grid_damper_loss());
-                *audit_out += t + u.elapsed();
-                if let Some(c) = coupling.as_mut() {
-                    let t = Instant::now();
-                    c.substep(packed, h, k);
-                    *contacts_time += t.elapsed();
-                }
-                if contain(packed, world, found) {
+            let damping = auditor.frame.damping;
+            let mut h = h;
+            loop {
+                (1..=*substeps_out).try_for_each(|k| {
                     if let Some(c) = coupling.as_mut() {
-                        c.moved();
+                        let t = Instant::now();
+                        c.begin_substep(packed);
+                        *contacts_time += t.elapsed();
                     }
+                    let t = Instant::now();
+                    auditor.begin_substep(packed);
+                    let t = t.elapsed();
+                    solver.substep(packed, h)?;
+                    let u = Instant::now();
+                    auditor.damping(packed, law, h, solver.grid_damper_loss());
+                    *audit_out += t + u.elapsed();
+                    if let Some(c) = coupling.as_mut() {
+                        let t = Instant::now();
+                        c.substep(packed, h, k);
+                        *contacts_time += t.elapsed();
+                    }
+                    if contain(packed, world, found) {
+                        if let Some(c) = coupling.as_mut() {
+                            c.moved();
+                        }
+                    }
+                    Ok::<(), SimError>(())
+                })?;
+                let t = Instant::now();
+                let e = auditor.energy(packed, gravity);
+                *end_out = Some(e);
+                *audit_out += t.elapsed();
+                if !retry || !found.is_empty() {
+                    break;
                 }
-                Ok::<(), SimError>(())
-            })?;
+                let f = &auditor.frame;
+                let before = auditor.run.residual;
+                let after = before + (e - f.start - f.edits + f.damping);
+                let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
+                    break;
+                };
+                controller.restore_start(packed);
+                auditor.frame.damping = damping;
+                *substeps_out = more;
+                h = dt / more as f64;
+                solver.prepare(packed, h)?;
+            }
             if check {
                 *beyond_out = Some(crate::metrics::beyond(packed, limit));
             }
-            let t = Instant::now();
-            *end_out = Some(auditor.energy(packed, gravity));
-            *audit_out += t.elapsed();
             Ok::<(), SimError>(())
         };
         if self.parallel {
@@ -182,6 +214,9 @@ impl Simulation {
         } else {
             integrate()?;
         }
+        // A retried frame took more substeps; the motion check's probe was for the old ones.
+        let probed = probed && substeps == self.config.substeps;
+        self.config.substeps = substeps;
         let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
         self.finish_frame(
             t0,
