@@ -42,6 +42,24 @@ pub enum SceneError {
         #[source]
         source: std::io::Error,
     },
+    /// Not a regular file: a directory, a device (`/dev/zero`), a FIFO or a socket.
+    #[error("{path}: not a regular file but {kind}")]
+    NotAFile {
+        /// The path given.
+        path: PathBuf,
+        /// What it is instead.
+        kind: &'static str,
+    },
+    /// Larger than [`crate::scene::MAX_FILE_BYTES`].
+    #[error(
+        "{path}: larger than {max} bytes (harmonic::scene::MAX_FILE_BYTES), too large for a scene"
+    )]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The most read.
+        max: u64,
+    },
     /// Syntax, unknown fields and wrong types, at ron's line and column (1-based).
     #[error("{path}:{line}:{column}: {message}")]
     Parse {
@@ -274,4 +292,50 @@ fn known_integrators() -> String {
         .map(|i| i.name())
         .collect::<Vec<_>>()
         .join(", ")
+}
+
+/// A number for a message: fixed with `digits` decimals where that reads well (0, and
+/// magnitudes from 10⁻³ to under 10⁶), scientific otherwise, so a blown-up energy prints as
+/// `+8.972e302`, not three hundred digits. `signed` writes a `+` on positive values.
+#[derive(Clone, Copy, Debug)]
+pub struct Readable {
+    /// The value.
+    pub value: f64,
+    /// Decimals (of the mantissa, in scientific form).
+    pub digits: usize,
+    /// Whether a positive value gets its `+`.
+    pub signed: bool,
+}
+
+impl Readable {
+    /// `value` with `digits` decimals.
+    pub fn new(value: f64, digits: usize) -> Self {
+        Self {
+            value,
+            digits,
+            signed: false,
+        }
+    }
+
+    /// `value` with `digits` decimals and its sign always written.
+    pub fn signed(value: f64, digits: usize) -> Self {
+        Self {
+            value,
+            digits,
+            signed: true,
+        }
+    }
+}
+
+impl fmt::Display for Readable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (v, d) = (self.value, self.digits);
+        let fixed = v == 0.0 || !v.is_finite() || (1e-3..1e6).contains(&v.abs());
+        match (fixed, self.signed) {
+            (true, true) => write!(f, "{v:+.d$}"),
+            (true, false) => write!(f, "{v:.d$}"),
+            (false, true) => write!(f, "{v:+.d$e}"),
+            (false, false) => write!(f, "{v:.d$e}"),
+        }
+    }
 }

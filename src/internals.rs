@@ -6,6 +6,7 @@
 use crate::scene::{Anchor, Cloth, Plane, Scene, SpringSpec};
 
 pub use crate::buffers::{GatherOptions, Packed, PackedGrid, PackedSpring};
+pub use crate::error::Readable;
 pub use crate::integrate::Solver;
 
 /// Packed buffers: the flat state and topology the kernels run on.

@@ -1,5 +1,6 @@
 //! What each stage of a frame cost (the order itself is `Simulation::step_coupled`).
 
+use crate::error::Readable;
 use std::time::Duration;
 
 /// Wall time of each stage in the last frame.
@@ -95,12 +96,13 @@ impl std::fmt::Display for Failure {
             } => write!(
                 f,
                 "frame {frame}: the spring from particle {a} to {b} is stretched {:.4e} % past its rest length, beyond \
-                 the strain limit of {:.4e} % ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} \
+                 the strain limit of {:.4e} % ({integrator}, {substeps} substep(s), h/h_c = {} \
                  for that spring). A blow-up: lower dt, raise the substeps or leave them automatic, \
                  or choose a more stable integrator; if the scene (or a drag) means to stretch this \
                  far, raise `strain_limit`",
                 100.0 * strain,
-                100.0 * limit
+                100.0 * limit,
+                Readable::new(step_ratio, 4)
             ),
             Failure::Energy {
                 frame,
@@ -115,14 +117,15 @@ impl std::fmt::Display for Failure {
             } => write!(
                 f,
                 "frame {frame}: the steps made {created:.4e} J of energy beyond what went in, \
-                 {:.4} % of the energy scale ({scale:.4e} J), past the energy limit of {:.4} % \
-                 ({integrator}, {substeps} substep(s), h/h_c = {step_ratio:.4} for the stiffest \
-                 spring; the spring stretched most joins particles {a} and {b}, at {:.4} %). The \
+                 {} % of the energy scale ({scale:.4e} J), past the energy limit of {} % \
+                 ({integrator}, {substeps} substep(s), h/h_c = {} for the stiffest \
+                 spring; the spring stretched most joins particles {a} and {b}, at {} %). The \
                  step is too large for the accuracy asked: lower dt, raise the substeps or leave \
                  them automatic, or choose another integrator; raise `energy_limit` to accept it",
-                100.0 * created / scale,
-                100.0 * limit,
-                100.0 * strain
+                Readable::new(100.0 * created / scale, 4),
+                Readable::new(100.0 * limit, 4),
+                Readable::new(step_ratio, 4),
+                Readable::new(100.0 * strain, 4)
             ),
         }
     }

@@ -260,53 +260,83 @@ pub struct StepChoice {
     pub capped: bool,
 }
 
-/// Substeps for a frame of `dt` with `integrator` on this network.
-pub fn choose(packed: &Packed, integrator: Integrator, dt: f64) -> StepChoice {
-    let w0_max = packed
-        .all_springs()
-        .map(|s| s.omega0_sq())
-        .fold(0.0, f64::max)
-        .sqrt();
-    // The network is at least as fast as its stiffest spring; power iteration approaches the
-    // top from below, so take the larger.
-    let omega_max = network_frequency(packed, 100).max(w0_max);
-    let active = packed.all_springs().filter(|s| s.omega0_sq() > 0.0);
-    let zeta_range = active
-        .map(|s| s.zeta())
-        .fold((f64::INFINITY, 0.0f64), |(lo, hi), z| {
-            (lo.min(z), hi.max(z))
-        });
-    let zeta_range = if zeta_range.0.is_finite() {
-        zeta_range
-    } else {
-        (0.0, 0.0)
-    };
-    let limit = match (
-        stable_omega_h(integrator, zeta_range.0),
-        stable_omega_h(integrator, zeta_range.1),
-    ) {
-        (Some(a), Some(b)) => Some(SAFETY * a.min(b)),
-        _ if integrator == Integrator::Xpbd => Some(XPBD_OMEGA_H),
-        _ => None,
-    };
-    let (substeps, capped) = match limit {
-        Some(c) if omega_max > 0.0 => {
-            let k = (dt * omega_max / c).ceil().max(1.0);
-            if k > MAX_SUBSTEPS as f64 {
-                (MAX_SUBSTEPS, true)
-            } else {
-                (k as u32, false)
-            }
+/// What the step choices read from a network: its highest natural frequency and its springs'
+/// damping ratios. Taken once per gather; every integrator's floor follows from it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Network {
+    /// Highest natural frequency (rad/s).
+    pub omega_max: f64,
+    /// Damping ratios of the least and most damped springs.
+    pub zeta_range: (f64, f64),
+}
+
+impl Network {
+    /// Estimates the network's frequency (grids through their window) and damping range.
+    pub fn of(packed: &Packed) -> Self {
+        let w0_max = packed
+            .all_springs()
+            .map(|s| s.omega0_sq())
+            .fold(0.0, f64::max)
+            .sqrt();
+        // The network is at least as fast as its stiffest spring; power iteration approaches
+        // the top from below, so take the larger.
+        let omega_max = network_frequency(packed, 100).max(w0_max);
+        let active = packed.all_springs().filter(|s| s.omega0_sq() > 0.0);
+        let zeta_range = active
+            .map(|s| s.zeta())
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), z| {
+                (lo.min(z), hi.max(z))
+            });
+        let zeta_range = if zeta_range.0.is_finite() {
+            zeta_range
+        } else {
+            (0.0, 0.0)
+        };
+        Self {
+            omega_max,
+            zeta_range,
         }
-        _ => (1, false),
-    };
-    StepChoice {
-        omega_max,
-        zeta_range,
-        limit,
-        substeps,
-        capped,
     }
+
+    /// Substeps for a frame of `dt` with `integrator` on this network.
+    pub fn choose(&self, integrator: Integrator, dt: f64) -> StepChoice {
+        let Self {
+            omega_max,
+            zeta_range,
+        } = *self;
+        let limit = match (
+            stable_omega_h(integrator, zeta_range.0),
+            stable_omega_h(integrator, zeta_range.1),
+        ) {
+            (Some(a), Some(b)) => Some(SAFETY * a.min(b)),
+            _ if integrator == Integrator::Xpbd => Some(XPBD_OMEGA_H),
+            _ => None,
+        };
+        let (substeps, capped) = match limit {
+            Some(c) if omega_max > 0.0 => {
+                let k = (dt * omega_max / c).ceil().max(1.0);
+                if k > MAX_SUBSTEPS as f64 {
+                    (MAX_SUBSTEPS, true)
+                } else {
+                    (k as u32, false)
+                }
+            }
+            _ => (1, false),
+        };
+        StepChoice {
+            omega_max,
+            zeta_range,
+            limit,
+            substeps,
+            capped,
+        }
+    }
+}
+
+/// Substeps for a frame of `dt` with `integrator` on this network ([`Network::of`], then
+/// [`Network::choose`]).
+pub fn choose(packed: &Packed, integrator: Integrator, dt: f64) -> StepChoice {
+    Network::of(packed).choose(integrator, dt)
 }
 
 /// The spring whose `h/h_c` lies closest to a whole number ≥ 1, if within `tolerance`: at
@@ -335,10 +365,12 @@ pub const CLOSED_FORM_MARGIN: f64 = 2.0;
 /// chosen where symplectic Euler would need more than [`CLOSED_FORM_MARGIN`] times its
 /// substeps, symplectic Euler otherwise (on a 16×16 cloth at ζ = 1, 3, 10 and 30, symplectic
 /// Euler took 1.2–1.3× the closed form's floor substeps and ran 2.0–4.7× faster within the
-/// tolerance: NOTES.md, "The integrator chosen").
-pub fn choose_integrator(packed: &Packed, dt: f64) -> (Integrator, String) {
-    let se = choose(packed, Integrator::SymplecticEuler, dt);
-    let cf = choose(packed, Integrator::Harmonic, dt);
+/// tolerance: NOTES.md, "The integrator chosen"). Both floors come from one estimate of the
+/// network, taken on the simulation's own gather (grids kept whole: both candidates step them
+/// so), so the choice costs no second copy of the cloth.
+pub fn choose_integrator(network: &Network, dt: f64) -> (Integrator, String) {
+    let se = network.choose(Integrator::SymplecticEuler, dt);
+    let cf = network.choose(Integrator::Harmonic, dt);
     let zeta = se.zeta_range.1;
     let ratio = se.substeps as f64 / cf.substeps.max(1) as f64;
     if ratio > CLOSED_FORM_MARGIN {

@@ -182,3 +182,277 @@ fn render_refuses_absurd_pictures_before_drawing() {
         &["--seconds", "finite and > 0"],
     );
 }
+
+/// Runs the binary under a 4 GiB address-space limit (a run that would take more fails here
+/// instead of taking the machine down), with its stdout sent to `stdout`.
+fn capped(args: &[&str], stdout: Stdio) -> Output {
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -v 4194304; exec \"$0\" \"$@\"")
+        .arg(env!("CARGO_BIN_EXE_harmonic"))
+        .args(args)
+        .stdout(stdout)
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs");
+    let start = Instant::now();
+    while child.try_wait().expect("waits").is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("harmonic {args:?} still running after 60 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
+#[test]
+fn a_reader_that_stops_reading_ends_the_run_quietly() {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_harmonic"))
+        .args(["run", CHAIN])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs");
+    // `| head -1`: one line, then the pipe closes.
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with("scene: "), "{first}");
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!stderr.contains("error"), "{stderr}");
+    // The shell's status for a broken pipe: not a success, not a crash (101).
+    assert_eq!(out.status.code(), Some(141), "{stderr}");
+}
+
+#[test]
+fn a_full_disk_on_stdout_is_an_error_message() {
+    let full = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/full")
+        .unwrap();
+    for args in [&["check", CHAIN][..], &["run", CHAIN, "--steps", "2"]] {
+        let out = capped(args, Stdio::from(full.try_clone().unwrap()));
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("writing to standard output") && stderr.contains("No space left"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+#[test]
+fn endless_and_special_files_are_refused_by_name() {
+    let fifo = temp("fifo.ron");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let dir = temp("a_folder.ron");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (path, what) in [
+        ("/dev/zero", "a device, pipe or socket"),
+        ("/dev/urandom", "a device, pipe or socket"),
+        (fifo.to_str().unwrap(), "a device, pipe or socket"),
+        (dir.to_str().unwrap(), "a directory"),
+    ] {
+        let out = capped(&["check", path], Stdio::piped());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{path}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{path}: not a regular file but {what}")),
+            "{path}: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn a_scene_larger_than_the_read_limit_is_refused_unread() {
+    let big = temp("big.ron");
+    let f = std::fs::File::create(&big).unwrap();
+    // Sparse: no disk used.
+    f.set_len(harmonic::scene::MAX_FILE_BYTES + 1).unwrap();
+    drop(f);
+    let out = capped(&["check", big.to_str().unwrap()], Stdio::piped());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("larger than 268435456 bytes"), "{stderr}");
+    let _ = std::fs::remove_file(&big);
+}
+
+#[test]
+fn the_trajectory_never_overwrites_the_scene_through_a_hard_link() {
+    let text = std::fs::read_to_string(CHAIN).unwrap();
+    let scene = scene_file("linked.ron", &text);
+    let link = temp("hard_link.ron");
+    let _ = std::fs::remove_file(&link);
+    std::fs::hard_link(&scene, &link).unwrap();
+    refused(
+        &[
+            "run",
+            scene.to_str().unwrap(),
+            "--steps",
+            "2",
+            "--trajectory",
+            link.to_str().unwrap(),
+        ],
+        &["--trajectory", "the scene being run"],
+    );
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), text);
+}
+
+#[test]
+fn a_blown_up_run_prints_its_magnitudes_with_an_exponent() {
+    // A stiff chain under explicit Euler with one substep and both limits off (so the run
+    // goes on, as asked): its energy and strain reach about 1e88 %.
+    let out = harmonic(&[
+        "run",
+        CHAIN,
+        "--integrator",
+        "explicit-euler",
+        "--substeps",
+        "1",
+        "--dt",
+        "0.01",
+        "--steps",
+        "40",
+        "--energy-limit",
+        "inf",
+        "--strain-limit",
+        "inf",
+    ]);
+    let text =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(text.contains("e88 %"), "{text}");
+    let longest = text
+        .split(|c: char| !c.is_ascii_digit())
+        .map(str::len)
+        .max()
+        .unwrap_or(0);
+    assert!(longest < 20, "a number of {longest} digits:\n{text}");
+}
+
+#[cfg(feature = "gpu")]
+#[test]
+fn render_refuses_what_it_cannot_write_before_drawing() {
+    // Checked before an adapter is asked for: these need no GPU. A 32768² sheet is 4 GiB.
+    let out = capped(
+        &[
+            "render",
+            CHAIN,
+            "--out",
+            temp("sheet").to_str().unwrap(),
+            "--size",
+            "8192x8192",
+            "--seconds",
+            "0.02",
+            "--frames",
+            "16",
+            "--sheet",
+        ],
+        Stdio::piped(),
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    for needle in ["--sheet", "32768x32768", "lower --size or --frames"] {
+        assert!(stderr.contains(needle), "{stderr}");
+    }
+    let file = scene_file("not_a_folder", "");
+    refused(
+        &["render", CHAIN, "--out", file.to_str().unwrap()],
+        &["--out", "not a directory"],
+    );
+    refused(
+        &["render", CHAIN, "--strain-scale", "1e308"],
+        &["--strain-scale 1e308"],
+    );
+}
+
+#[cfg(feature = "gpu")]
+#[test]
+fn a_headless_render_prints_no_window_system_noise() {
+    let dir = temp("quiet");
+    let out = Command::new(env!("CARGO_BIN_EXE_harmonic"))
+        .args([
+            "render",
+            CHAIN,
+            "--out",
+            dir.to_str().unwrap(),
+            "--size",
+            "64x48",
+        ])
+        .args(["--seconds", "0.01"])
+        // A headless machine: no session, so nothing to find a display in.
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success() {
+        assert!(
+            std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
+            "{stderr}"
+        );
+        assert!(stderr.contains("no GPU adapter"), "{stderr}");
+        return;
+    }
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+    assert!(!stderr.lines().any(|l| l.starts_with("error")), "{stderr}");
+}
+
+#[test]
+fn a_run_of_days_is_refused_and_a_slow_run_speaks_within_seconds() {
+    // Each bound alone admits it: 10⁶ frames, 10⁵ substeps a frame.
+    refused(
+        &["run", CHAIN, "--steps", "1000000", "--substeps", "100000"],
+        &["1.000e11 substeps", "--max-run-substeps"],
+    );
+    // Raised, the run starts; its first progress line comes within seconds, long before a
+    // tenth of it is done.
+    use std::io::{BufRead, BufReader};
+    let start = Instant::now();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_harmonic"))
+        .args(["run", CHAIN, "--steps", "1000000", "--substeps", "20000"])
+        .args(["--max-run-substeps", "100000000000"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stderr.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let waited = start.elapsed();
+    let _ = child.kill();
+    let _ = child.wait();
+    assert!(line.starts_with("progress: frame "), "{line}");
+    assert!(waited < Duration::from_secs(5), "{waited:?}: {line}");
+}
+
+#[test]
+fn a_run_shorter_than_one_frame_is_refused() {
+    refused(
+        &["run", CHAIN, "--seconds", "1e-300"],
+        &["--seconds", "shorter than one frame"],
+    );
+    let long_dt = scene_file(
+        "long_dt.ron",
+        &std::fs::read_to_string(CHAIN)
+            .unwrap()
+            .replace("dt: 0.001", "dt: 10.0")
+            .replace("seconds: 3.0", "seconds: 1.0"),
+    );
+    refused(
+        &["run", long_dt.to_str().unwrap()],
+        &["seconds", "shorter than one frame (dt 10.0 s)"],
+    );
+}

@@ -1,8 +1,12 @@
-//! The memory budget of a cloth on the CPU back end: at most 150 bytes of heap per particle with
-//! the default integrator, its springs included, and 200 with the closed form (whose dampers
-//! the energy audit books after each substep from a copy of the state at its start, 48 B), from building the scene through gathering and stepping (the peak of
-//! live heap bytes, counted by a tracking global allocator; `harmonic run`'s peak RSS in
-//! BENCHMARKS.md is the figure for the whole process).
+//! The memory budget of a cloth on the CPU back end, from building the scene through gathering
+//! and stepping (the peak of live heap bytes, counted by a tracking global allocator;
+//! `harmonic run`'s peak RSS in BENCHMARKS.md is the figure for the whole process):
+//! - the grid: at most 150 bytes per particle with symplectic Euler and fixed substeps, its
+//!   springs included, and 200 with the closed form (whose dampers the energy audit books after
+//!   each substep from a copy of the state at its start, 48 B);
+//! - the default path (no integrator named, automatic substeps, past the first motion checks):
+//!   the grid plus the accuracy controller's own state, a frame-start copy (48 B) and the
+//!   motion check's probe (12 B), at most 210 bytes per particle.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -39,16 +43,21 @@ unsafe impl GlobalAlloc for Tracking {
 #[global_allocator]
 static GLOBAL: Tracking = Tracking;
 
-/// Peak heap bytes per particle while `integrator` builds, gathers and steps an n×n cloth.
-fn peak_per_particle(n: u32, integrator: Integrator) -> f64 {
+/// Peak heap bytes per particle while `integrator` (None: the scene names none) builds,
+/// gathers and steps an n×n cloth for `frames` frames, with fixed substeps or automatic ones.
+fn peak_per_particle(n: u32, integrator: Option<Integrator>, auto: bool, frames: u32) -> f64 {
     let mut scene = harmonic::internals::hanging_cloth(n);
-    scene.integrator = Some(integrator.name().into());
+    scene.integrator = integrator.map(|i| i.name().into());
+    if auto {
+        scene.substeps = None;
+    }
     let base = LIVE.load(Ordering::Relaxed);
     PEAK.store(base, Ordering::Relaxed);
     let mut sim = Simulation::from_scene(&scene).unwrap();
-    for _ in 0..2 {
+    for _ in 0..frames {
         sim.step().unwrap();
     }
+    assert_eq!(sim.config().auto_substeps, auto);
     assert!(sim.positions().iter().all(|x| x.is_finite()));
     let particles = sim.positions().len();
     drop(sim);
@@ -59,13 +68,28 @@ fn peak_per_particle(n: u32, integrator: Integrator) -> f64 {
 fn a_cloth_costs_at_most_150_bytes_per_particle() {
     // One test in this file: the counters see only it.
     let n = 512;
-    let default = peak_per_particle(n, Integrator::default());
+    let default = peak_per_particle(n, Some(Integrator::default()), false, 2);
     // The closed form keeps the cloth a grid too.
-    let harmonic = peak_per_particle(n, Integrator::Harmonic);
+    let harmonic = peak_per_particle(n, Some(Integrator::Harmonic), false, 2);
     // An integrator that needs the springs one by one, for scale.
-    let expanded = peak_per_particle(n, Integrator::HarmonicGs);
+    let expanded = peak_per_particle(n, Some(Integrator::HarmonicGs), false, 2);
+    // What a scene gets that names neither: the integrator chosen on the simulation's own
+    // gather, the substeps by the accuracy controller, through two motion checks.
+    let path = peak_per_particle(n, None, true, 32);
+    let controller = path - default;
     println!(
-        "{n}×{n} cloth: {default:.1} B per particle (default), {harmonic:.1} B (harmonic), {expanded:.1} B (harmonic-gs)"
+        "{n}×{n} cloth: {default:.1} B per particle (symplectic Euler, fixed substeps), \
+         {harmonic:.1} B (harmonic), {expanded:.1} B (harmonic-gs); the default path \
+         {path:.1} B, of which the accuracy controller's state {controller:.1} B"
+    );
+    assert!(
+        path <= 210.0,
+        "the default path peaks at {path:.1} B per particle"
+    );
+    // Its frame-start copy (48 B) and probe (12 B), and nothing the size of a second cloth.
+    assert!(
+        controller <= 64.0,
+        "the controller's state takes {controller:.1} B per particle"
     );
     assert!(
         default <= 150.0,

@@ -13,7 +13,7 @@ mod geometry;
 mod offscreen;
 mod renderer;
 
-pub use offscreen::{Image, ImageError, Offscreen};
+pub use offscreen::{Image, ImageError, Offscreen, Sheet, SheetError, MAX_SHEET_SIDE};
 pub use renderer::Renderer;
 
 /// The WGSL source of the renderer's pipelines (`shaders/render.wgsl`).

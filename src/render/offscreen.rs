@@ -50,29 +50,15 @@ impl Image {
         seen.len()
     }
 
-    /// `frames` tiled `columns` wide (all the same size).
-    pub fn sheet(frames: &[Image], columns: u32) -> Option<Image> {
-        let first = frames.first()?;
-        let (w, h) = (first.width, first.height);
-        let columns = columns.clamp(1, frames.len() as u32);
-        let rows = (frames.len() as u32).div_ceil(columns);
-        let mut out = Image {
-            width: w * columns,
-            height: h * rows,
-            rgba: vec![255; (w * columns * h * rows * 4) as usize],
-        };
+    /// `frames` tiled `columns` wide (all the same size), through a [`Sheet`].
+    pub fn sheet(frames: &[Image], columns: u32) -> Result<Image, SheetError> {
+        let first = frames.first().ok_or(SheetError::Empty)?;
+        let count = u32::try_from(frames.len()).unwrap_or(u32::MAX);
+        let mut sheet = Sheet::new((first.width, first.height), count, columns)?;
         for (k, f) in frames.iter().enumerate() {
-            if (f.width, f.height) != (w, h) {
-                return None;
-            }
-            let (cx, cy) = (k as u32 % columns, k as u32 / columns);
-            for y in 0..h {
-                let src = &f.rgba[(y * w * 4) as usize..((y + 1) * w * 4) as usize];
-                let at = (((cy * h + y) * out.width + cx * w) * 4) as usize;
-                out.rgba[at..at + src.len()].copy_from_slice(src);
-            }
+            sheet.place(k as u32, f)?;
         }
-        Some(out)
+        Ok(sheet.finish())
     }
 
     /// Writes the image to `path` as an 8-bit RGBA PNG; an error names the path.
@@ -88,6 +74,113 @@ impl Image {
         let mut writer = encoder.write_header().map_err(at)?;
         writer.write_image_data(&self.rgba).map_err(at)
     }
+}
+
+/// The longest side of a contact sheet, in pixels: a texture size viewers and GPUs take, and at
+/// most 1 GiB of RGBA.
+pub const MAX_SHEET_SIDE: u32 = 16_384;
+
+/// A contact sheet, filled as each picture arrives (so the pictures need not be held).
+pub struct Sheet {
+    image: Image,
+    tile: (u32, u32),
+    columns: u32,
+    count: u32,
+}
+
+impl Sheet {
+    /// A white sheet for `count` pictures of `tile` pixels, `columns` wide (clamped to 1 ..=
+    /// `count`); refused past [`MAX_SHEET_SIDE`] a side, before anything is allocated.
+    pub fn new(tile: (u32, u32), count: u32, columns: u32) -> Result<Sheet, SheetError> {
+        if count == 0 || tile.0 == 0 || tile.1 == 0 {
+            return Err(SheetError::Empty);
+        }
+        let columns = columns.clamp(1, count);
+        let rows = count.div_ceil(columns);
+        let (w, h) = (
+            u64::from(tile.0) * u64::from(columns),
+            u64::from(tile.1) * u64::from(rows),
+        );
+        let max = u64::from(MAX_SHEET_SIDE);
+        if w > max || h > max {
+            return Err(SheetError::TooLarge {
+                width: w,
+                height: h,
+            });
+        }
+        Ok(Sheet {
+            // Both sides ≤ 2¹⁴: the size fits in u32 and usize.
+            image: Image {
+                width: w as u32,
+                height: h as u32,
+                rgba: vec![255; (w * h * 4) as usize],
+            },
+            tile,
+            columns,
+            count,
+        })
+    }
+
+    /// Copies picture `k` (from 0, row by row) into its tile.
+    pub fn place(&mut self, k: u32, picture: &Image) -> Result<(), SheetError> {
+        let (w, h) = self.tile;
+        if (picture.width, picture.height) != (w, h) || k >= self.count {
+            return Err(SheetError::Mismatch {
+                index: k,
+                size: (picture.width, picture.height),
+                tile: self.tile,
+                count: self.count,
+            });
+        }
+        let (w, h) = (w as usize, h as usize);
+        let (cx, cy) = ((k % self.columns) as usize, (k / self.columns) as usize);
+        let stride = self.image.width as usize * 4;
+        for y in 0..h {
+            let src = &picture.rgba[y * w * 4..(y + 1) * w * 4];
+            let at = (cy * h + y) * stride + cx * w * 4;
+            self.image.rgba[at..at + src.len()].copy_from_slice(src);
+        }
+        Ok(())
+    }
+
+    /// The sheet; tiles never placed stay white.
+    pub fn finish(self) -> Image {
+        self.image
+    }
+}
+
+/// A contact sheet that cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SheetError {
+    /// No pictures, or pictures of no pixels.
+    #[error("a contact sheet needs at least one picture of at least one pixel")]
+    Empty,
+    /// Past [`MAX_SHEET_SIDE`] a side.
+    #[error(
+        "the contact sheet would be {width}x{height} pixels, past {MAX_SHEET_SIDE} a side \
+         (1 GiB of RGBA)"
+    )]
+    TooLarge {
+        /// Its width in pixels.
+        width: u64,
+        /// Its height in pixels.
+        height: u64,
+    },
+    /// A picture of another size than the tiles, or past the last tile.
+    #[error(
+        "picture {index} is {}x{} for a sheet of {count} tiles of {}x{}",
+        size.0, size.1, tile.0, tile.1
+    )]
+    Mismatch {
+        /// The picture's index.
+        index: u32,
+        /// Its size.
+        size: (u32, u32),
+        /// The tiles' size.
+        tile: (u32, u32),
+        /// The tiles on the sheet.
+        count: u32,
+    },
 }
 
 /// An image could not be written.

@@ -52,16 +52,20 @@ pub struct Limits {
     /// Frames one run may take (`seconds / dt`): a typo such as `dt: 1e-12` is refused
     /// instead of running for days.
     pub max_frames: u64,
+    /// Substeps one run may take where they are fixed (frames × substeps per frame): each
+    /// bound alone still admits a run of days.
+    pub max_run_substeps: u64,
 }
 
 impl Limits {
-    /// The defaults: 2²² particles, 2²⁵ springs, 100 000 fixed substeps per frame and
-    /// 1 000 000 frames a run (4.6 hours at 60 Hz).
+    /// The defaults: 2²² particles, 2²⁵ springs, 100 000 fixed substeps per frame,
+    /// 1 000 000 frames a run (4.6 hours at 60 Hz) and 10⁸ fixed substeps a run.
     pub const DEFAULT: Limits = Limits {
         max_particles: 1 << 22,
         max_springs: 1 << 25,
         max_substeps: crate::step_control::MAX_SUBSTEPS,
         max_frames: 1_000_000,
+        max_run_substeps: 100_000_000,
     };
 
     /// The frames a run of `seconds` at `dt` takes, or why it is refused (an [`Issue`] at
@@ -80,7 +84,13 @@ impl Limits {
                 "needs a frame step dt finite and > 0, got {dt:?}"
             )));
         }
-        let frames = (seconds / dt).round().max(1.0);
+        // A hair under one frame is one frame (a duration written as a multiple of dt).
+        if seconds / dt < 1.0 - 1e-9 {
+            return Err(issue(format!(
+                "{seconds:?} s is shorter than one frame (dt {dt:?} s): a run takes whole frames"
+            )));
+        }
+        let frames = (seconds / dt).round();
         if frames.is_nan() || frames > self.max_frames as f64 {
             return Err(issue(format!(
                 "{seconds:?} s at dt {dt:?} s is {frames:?} frames; the limit is {} \
@@ -90,6 +100,63 @@ impl Limits {
         }
         Ok(frames as u64)
     }
+
+    /// Whether `frames` frames at `substeps` fixed substeps each fit
+    /// [`Self::max_run_substeps`]; the error says how many that is.
+    pub fn run_substeps(&self, frames: u64, substeps: u32) -> Result<(), String> {
+        let total = frames.saturating_mul(u64::from(substeps));
+        if total > self.max_run_substeps {
+            return Err(format!(
+                "{frames} frame(s) × {substeps} substep(s) is {:.3e} substeps; the limit is \
+                 {:.3e} (Limits::max_run_substeps, --max-run-substeps)",
+                total as f64, self.max_run_substeps as f64
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The largest file [`Scene::load`] reads (256 MiB): a scene is text, and a device or a pipe
+/// that never ends (`/dev/zero`) is refused by name instead of read until memory runs out.
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
+
+/// A file's text, refused before it is opened unless it is a regular file (opening a FIFO
+/// would block until a writer came) and read to at most [`MAX_FILE_BYTES`].
+pub(crate) fn read_text(path: &Path) -> Result<String, SceneError> {
+    use std::io::Read;
+    let io = |source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let meta = std::fs::metadata(path).map_err(io)?;
+    if !meta.is_file() {
+        let kind = if meta.is_dir() {
+            "a directory"
+        } else {
+            "a device, pipe or socket"
+        };
+        return Err(SceneError::NotAFile {
+            path: path.to_path_buf(),
+            kind,
+        });
+    }
+    let too_large = || SceneError::TooLarge {
+        path: path.to_path_buf(),
+        max: MAX_FILE_BYTES,
+    };
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(too_large());
+    }
+    let mut text = String::new();
+    // The file may grow after its size was read.
+    (std::fs::File::open(path).map_err(io)?)
+        .take(MAX_FILE_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(io)?;
+    if text.len() as u64 > MAX_FILE_BYTES {
+        return Err(too_large());
+    }
+    Ok(text)
 }
 
 impl Default for Limits {
@@ -351,11 +418,7 @@ impl Scene {
     /// Reads, parses and validates a scene file within `limits`.
     pub fn load_with(path: impl AsRef<Path>, limits: &Limits) -> Result<Scene, SceneError> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Scene::parse_with(&text, path, limits)
+        Scene::parse_with(&read_text(path)?, path, limits)
     }
 
     /// Parses and validates scene text within the default [`Limits`]; `path` only names the
@@ -440,7 +503,7 @@ pub fn exercise(data: &[u8]) -> Result<crate::Diagnostics, crate::Error> {
         max_particles: 4096,
         max_springs: 32_768,
         max_substeps: 64,
-        max_frames: Limits::DEFAULT.max_frames,
+        ..Limits::DEFAULT
     };
     let text = String::from_utf8_lossy(data);
     let scene = Scene::parse_with(&text, "fuzz.ron", &LIMITS)?;

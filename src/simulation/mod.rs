@@ -81,6 +81,9 @@ pub struct Simulation {
     state_edited: bool,
     /// The automatic step choice, when `auto_substeps` is on.
     choice: Option<StepChoice>,
+    /// The network's frequency and damping, taken at every gather and pin refresh when a
+    /// choice needs it (automatic substeps, or the integrator still to choose).
+    network: Option<step_control::Network>,
     /// Whether the passes run on rayon's pool (large scenes only).
     parallel: bool,
     steps: u64,
@@ -195,12 +198,10 @@ impl Simulation {
         if props.is_some() {
             config.backend = props_backend(config.backend);
         }
-        let mut integrator_reason = None;
+        // Gathered first as symplectic Euler: both candidates step the grids whole, so the
+        // choice reads the simulation's own gather, not a second copy of the cloth.
         if config.auto_integrator {
-            let packed = Packed::gather(&world)?;
-            let (integrator, why) = step_control::choose_integrator(&packed, config.dt);
-            config.integrator = integrator;
-            integrator_reason = Some(why);
+            config.integrator = crate::Integrator::SymplecticEuler;
         }
         let mut sim = Self {
             world,
@@ -220,8 +221,9 @@ impl Simulation {
             auditor: Default::default(),
             controller: Default::default(),
             energy_in_motion: 0.0,
-            integrator_reason,
+            integrator_reason: None,
             choice: None,
+            network: None,
             parallel: false,
             steps: 0,
             time: 0.0,
@@ -238,6 +240,20 @@ impl Simulation {
         #[cfg(not(feature = "gpu"))]
         refuse_gpu(&config)?;
         sim.gather()?;
+        if let (true, Some(network)) = (config.auto_integrator, sim.network) {
+            let (integrator, why) = step_control::choose_integrator(&network, config.dt);
+            sim.integrator_reason = Some(why);
+            if integrator != sim.config.integrator {
+                let c = &mut sim.config;
+                c.integrator = integrator;
+                sim.solver = Solver::new(integrator, c.exact_displacement, c.gravity);
+                #[cfg(feature = "gpu")]
+                {
+                    sim.gpu = gpu_solver(c)?;
+                }
+                sim.gather()?;
+            }
+        }
         Ok(sim)
     }
 
@@ -311,6 +327,7 @@ impl Simulation {
             self.dirty = true;
             return self.gather();
         }
+        self.estimate_network();
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
         #[cfg(feature = "gpu")]
@@ -357,10 +374,20 @@ impl Simulation {
         self.gpu.as_mut()
     }
 
+    /// Estimates the network where a choice needs it ([`Self::choose_substeps`], the
+    /// integrator at load).
+    fn estimate_network(&mut self) {
+        let wanted = self.config.auto_substeps
+            || (self.config.auto_integrator && self.integrator_reason.is_none());
+        self.network = wanted.then(|| step_control::Network::of(&self.packed));
+    }
+
+    /// The automatic substeps, from the last [`Self::estimate_network`].
     fn choose_substeps(&mut self) {
-        self.choice = self.config.auto_substeps.then(|| {
-            let choice = step_control::choose(&self.packed, self.config.integrator, self.config.dt);
-            self.config.substeps = choice.substeps;
+        let (config, network) = (&mut self.config, self.network);
+        self.choice = network.filter(|_| config.auto_substeps).map(|n| {
+            let choice = n.choose(config.integrator, config.dt);
+            config.substeps = choice.substeps;
             choice
         });
         if let Some(c) = &self.choice {

@@ -432,6 +432,7 @@ impl Simulation {
         }
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
+        self.estimate_network();
         self.choose_substeps();
         self.solver.prepare(&self.packed, self.config.h())?;
         self.auditor

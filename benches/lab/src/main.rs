@@ -100,6 +100,9 @@ enum Command {
     },
 }
 
+/// The longest hard case `stability --seconds` runs (an hour simulated: hours of wall time).
+const MAX_SECONDS: f64 = 3600.0;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -109,6 +112,12 @@ fn main() -> ExitCode {
         } => stability::write_hard_scenes(&dir)
             .map(|n| println!("wrote {n} scenes to {}", dir.display()))
             .map_err(|e| format!("{}: {e}", dir.display())),
+        Command::Stability { seconds, .. } if !(seconds > 0.0 && seconds <= MAX_SECONDS) => {
+            Err(format!(
+                "--seconds {seconds}: expected simulated seconds per case, > 0 and at most \
+                 {MAX_SECONDS}"
+            ))
+        }
         Command::Stability {
             seconds, full, out, ..
         } => {

@@ -96,3 +96,40 @@ fn throughput_refuses_cloths_it_cannot_time() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--repeats 0"));
 }
+
+#[test]
+fn absurd_factors_and_durations_are_refused_not_panicked_on() {
+    let dir = std::env::temp_dir().join(format!("harmonic-lab-hostile-{}", std::process::id()));
+    let bench = |stiffen: &str| {
+        harmonic_lab(&[
+            "bench",
+            "--quick",
+            "--scenes",
+            "chain20",
+            "--integrators",
+            "harmonic",
+            "--stiffen",
+            stiffen,
+            "--out",
+            dir.to_str().unwrap(),
+        ])
+    };
+    for (stiffen, needle) in [
+        ("1e6", "the RK4 reference would need more than 100000 steps"),
+        ("1e308", "stiffness: must be finite"),
+    ] {
+        let out = bench(stiffen);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--stiffen {stiffen}: {stderr}");
+        assert!(stderr.contains("--stiffen"), "{stderr}");
+        assert!(stderr.contains(needle), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    for seconds in ["NaN", "0", "inf", "-1"] {
+        let out = harmonic_lab(&["stability", &format!("--seconds={seconds}")]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "--seconds {seconds}: {stderr}");
+        assert!(stderr.contains("--seconds"), "{stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

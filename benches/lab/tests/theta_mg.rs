@@ -58,7 +58,7 @@ impl Chain {
         let g = DVec3::from(scene.gravity);
         Chain {
             hc: stability::h_crit(&packed),
-            reference: accuracy::reference(&packed, g).0,
+            reference: accuracy::reference(&packed, g).unwrap().0,
             packed,
             g,
         }

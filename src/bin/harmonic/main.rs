@@ -11,9 +11,33 @@ use clap::{Parser, Subcommand};
 mod progress;
 mod summary;
 mod trajectory;
+use harmonic::internals::Readable;
 use harmonic::scene::Limits;
 use harmonic::{Backend, Scene, SimError, Simulation};
 use progress::Progress;
+
+/// Standard output closed by its reader (`harmonic run … | head -1`): the run stops quietly,
+/// as `ls | head` does, with the shell's status for a broken pipe.
+const CLOSED: &str = "standard output closed";
+const CLOSED_STATUS: u8 = 141;
+
+/// One line to standard output: a closed pipe is [`CLOSED`], any other failure (a full disk)
+/// an error that says so.
+fn out(args: std::fmt::Arguments) -> Result<(), String> {
+    let mut stdout = std::io::stdout().lock();
+    match writeln!(stdout, "{args}").and_then(|()| stdout.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(CLOSED.into()),
+        Err(e) => Err(format!("writing to standard output: {e}")),
+    }
+}
+
+/// `println!` that returns [`out`]'s error from the enclosing function.
+macro_rules! say {
+    ($($t:tt)*) => {
+        out(format_args!($($t)*))?
+    };
+}
 
 #[derive(Parser)]
 #[command(
@@ -55,6 +79,9 @@ struct LimitArgs {
     /// Refuse runs of more frames than this (seconds / dt, or --steps).
     #[arg(long, default_value_t = Limits::DEFAULT.max_frames)]
     max_frames: u64,
+    /// Refuse runs of more substeps than this where they are fixed (frames × substeps).
+    #[arg(long, default_value_t = Limits::DEFAULT.max_run_substeps)]
+    max_run_substeps: u64,
 }
 
 impl LimitArgs {
@@ -64,36 +91,47 @@ impl LimitArgs {
             max_springs: self.max_springs,
             max_substeps: self.max_substeps,
             max_frames: self.max_frames,
+            max_run_substeps: self.max_run_substeps,
         }
     }
 }
 
-/// The frames of a run: `--steps`, else `seconds` (the flag's, the scene's, else 1 s) at `dt`;
-/// refused, naming the flag, when not a time > 0 or over `--max-frames`.
+/// The frames of a run: `--steps`, else `seconds` (the flag's, the scene's, else 1 s) at the
+/// config's `dt`; refused, naming the flag, when not a time of at least one frame, over
+/// `--max-frames`, or (with fixed substeps) over `--max-run-substeps` in all.
 fn frames(
     steps: Option<u64>,
     flag: Option<f64>,
     scene: Option<f64>,
-    dt: f64,
+    config: &harmonic::SimConfig,
     limits: &Limits,
 ) -> Result<u64, String> {
-    if let Some(n) = steps {
-        if n == 0 || n > limits.max_frames {
+    let (what, frames) = match (steps, flag, scene) {
+        (Some(n), ..) if n == 0 || n > limits.max_frames => {
             return Err(format!(
                 "--steps {n}: expected 1 to {} frames (--max-frames)",
                 limits.max_frames
-            ));
+            ))
         }
-        return Ok(n);
-    }
-    let (what, seconds) = match (flag, scene) {
-        (Some(t), _) => ("--seconds", t),
-        (None, Some(t)) => ("the scene's seconds", t),
-        (None, None) => ("the default 1 s", 1.0),
+        (Some(n), ..) => ("--steps", n),
+        (None, flag, scene) => {
+            let (what, seconds) = match (flag, scene) {
+                (Some(t), _) => ("--seconds", t),
+                (None, Some(t)) => ("the scene's seconds", t),
+                (None, None) => ("the default 1 s", 1.0),
+            };
+            let frames = limits
+                .frames(seconds, config.dt)
+                .map_err(|e| format!("{what}: {}", e.message))?;
+            (what, frames)
+        }
     };
-    limits
-        .frames(seconds, dt)
-        .map_err(|e| format!("{what}: {}", e.message))
+    if !config.auto_substeps {
+        limits
+            .run_substeps(frames, config.substeps)
+            .map_err(|e| format!("{what} with fixed substeps: {e}"))?;
+    }
+    Ok(frames)
 }
 
 #[derive(clap::Args)]
@@ -118,7 +156,7 @@ struct RenderArgs {
     strain: bool,
     /// Strain drawn fully red.
     #[arg(long, default_value_t = 0.1)]
-    strain_scale: f32,
+    strain_scale: f64,
     /// Draw the cloth's triangle edges.
     #[arg(long)]
     wireframe: bool,
@@ -171,6 +209,15 @@ struct RunArgs {
 }
 
 fn main() -> ExitCode {
+    // Mesa's Vulkan device-select layer probes for a Wayland display while listing adapters,
+    // and libwayland prints an error where there is no session (no XDG_RUNTIME_DIR): every
+    // headless render would print it. The adapter is chosen here by rank, not by that layer.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none()
+        && std::env::var_os("NODEVICE_SELECT").is_none()
+    {
+        // Before any thread starts.
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),
@@ -179,6 +226,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(msg) if msg == CLOSED => ExitCode::from(CLOSED_STATUS),
         Err(msg) => {
             eprintln!("error: {msg}");
             ExitCode::from(2)
@@ -188,7 +236,7 @@ fn main() -> ExitCode {
 
 #[cfg(feature = "gpu")]
 fn render(args: RenderArgs) -> Result<(), String> {
-    use harmonic::render::{Camera, Image, Offscreen, Style};
+    use harmonic::render::{Camera, Offscreen, Sheet, Style};
     let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|&v| v > 0);
     let (width, height) = match args.size.split_once(['x', 'X']) {
         Some((w, h)) => parse(w).zip(parse(h)),
@@ -201,17 +249,26 @@ fn render(args: RenderArgs) -> Result<(), String> {
             args.size
         )
     })?;
-    if !(args.strain_scale.is_finite() && args.strain_scale > 0.0) {
+    // Drawn in f32: a scale past its range would be drawn as infinite.
+    let strain_scale = args.strain_scale as f32;
+    if !(strain_scale.is_finite() && strain_scale > 0.0) {
         return Err(format!(
-            "--strain-scale {:?}: expected the strain drawn fully red, finite and > 0 (0.1 is 10 %)",
-            args.strain_scale
+            "--strain-scale {:?}: expected the strain drawn fully red, finite and > 0, at most {:e} (0.1 is 10 %)",
+            args.strain_scale,
+            f32::MAX
+        ));
+    }
+    if args.out.exists() && !args.out.is_dir() {
+        return Err(format!(
+            "--out {}: not a directory (a file of that name exists); name a folder",
+            args.out.display()
         ));
     }
     let limits = args.limits.limits();
     let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
     let mut sim = Simulation::from_scene_with(&scene, &limits).map_err(|e| e.to_string())?;
     let dt = sim.config().dt;
-    let steps = frames(None, args.seconds, scene.seconds, dt, &limits)?;
+    let steps = frames(None, args.seconds, scene.seconds, sim.config(), &limits)?;
     let seconds = steps as f64 * dt;
     if args.frames == 0 || u64::from(args.frames) > steps {
         return Err(format!(
@@ -219,8 +276,17 @@ fn render(args: RenderArgs) -> Result<(), String> {
             args.frames
         ));
     }
+    // The sheet is checked before the run and filled as each picture arrives.
+    let mut sheet = args
+        .sheet
+        .then(|| {
+            let columns = (f64::from(args.frames)).sqrt().ceil() as u32;
+            Sheet::new((width, height), args.frames, columns)
+        })
+        .transpose()
+        .map_err(|e| format!("--sheet: {e}: lower --size or --frames"))?;
     let mut offscreen = Offscreen::new(width, height).map_err(|e| e.to_string())?;
-    println!(
+    say!(
         "render: {} on {}, {width}x{height}, {} picture(s) over {seconds} s",
         args.scene.display(),
         offscreen.renderer().context().describe(),
@@ -232,15 +298,14 @@ fn render(args: RenderArgs) -> Result<(), String> {
     let style = Style {
         wireframe: args.wireframe,
         strain: args.strain,
-        strain_scale: args.strain_scale,
+        strain_scale,
     };
-    std::fs::create_dir_all(&args.out).map_err(|e| format!("{}: {e}", args.out.display()))?;
+    std::fs::create_dir_all(&args.out).map_err(|e| format!("--out {}: {e}", args.out.display()))?;
     let stem = args
         .scene
         .file_stem()
         .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
     let mut bar = Progress::new(steps);
-    let mut pictures = Vec::new();
     let mut done = 0u64;
     for k in 1..=args.frames {
         let target = (steps as f64 * k as f64 / args.frames as f64).round() as u64;
@@ -276,19 +341,16 @@ fn render(args: RenderArgs) -> Result<(), String> {
             sim.time(),
             image.cloth_pixels()
         );
-        bar.println(line);
-        if args.sheet {
-            pictures.push(image);
+        bar.println(line)?;
+        if let Some(sheet) = sheet.as_mut() {
+            sheet.place(k - 1, &image).map_err(|e| e.to_string())?;
         }
     }
     bar.finish();
-    if args.sheet {
-        let columns = (pictures.len() as f64).sqrt().ceil() as u32;
-        if let Some(sheet) = Image::sheet(&pictures, columns) {
-            let path = args.out.join(format!("{stem}_sheet.png"));
-            sheet.write_png(&path).map_err(|e| e.to_string())?;
-            println!("wrote {}", path.display());
-        }
+    if let Some(sheet) = sheet {
+        let path = args.out.join(format!("{stem}_sheet.png"));
+        sheet.finish().write_png(&path).map_err(|e| e.to_string())?;
+        say!("wrote {}", path.display());
     }
     Ok(())
 }
@@ -302,7 +364,7 @@ fn check(paths: &[PathBuf]) -> Result<(), String> {
     let mut bad = 0;
     for path in paths {
         match Scene::load(path) {
-            Ok(scene) => println!(
+            Ok(scene) => say!(
                 "{}: ok ({} particles)",
                 path.display(),
                 scene.particle_count()
@@ -331,10 +393,11 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     if let Some(path) = &args.trajectory {
-        let same = |a: &std::path::Path, b: &std::path::Path| matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b);
-        if same(path, &args.scene) {
+        // Every file the scene reads (today the scene file alone), by identity: a hard link
+        // or a symlink to the scene is the scene.
+        if trajectory::same_file(path, &args.scene) {
             return Err(format!(
-                "--trajectory {}: that is the scene being run; name another file",
+                "--trajectory {}: that is the scene being run (the same file); name another file",
                 path.display()
             ));
         }
@@ -370,7 +433,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     if args.every == 0 {
         return Err("--every must be ≥ 1".into());
     }
-    let steps = frames(args.steps, args.seconds, scene.seconds, config.dt, &limits)?;
+    let steps = frames(args.steps, args.seconds, scene.seconds, &config, &limits)?;
 
     let mut traj = match &args.trajectory {
         Some(path) => Some(trajectory::create(path, &sim)?),
@@ -381,11 +444,11 @@ fn run(args: RunArgs) -> Result<(), String> {
     let (n, m) = (packed.particle_count(), packed.spring_count());
     let start = sim.diagnostics();
     let ratio = harmonic::internals::metrics::worst_step_ratio(packed, config.h());
-    println!(
+    say!(
         "scene: {} ({n} particles, {m} springs)",
         args.scene.display()
     );
-    println!(
+    say!(
         "integrator: {}{}{}, dt {} s, {} substep(s), h = {:.4e} s",
         config.integrator,
         if config.integrator.is_research() {
@@ -403,7 +466,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         config.h()
     );
     if let Some(why) = sim.integrator_choice() {
-        println!("integrator chosen: {why} (the scene names none)");
+        say!("integrator chosen: {why} (the scene names none)");
     }
     if let Some(c) = sim.step_choice() {
         let limit = c.limit.map_or("no stability limit".to_string(), |l| {
@@ -414,7 +477,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             };
             format!("ω_max h ≤ {l:.3}{why}")
         });
-        println!(
+        say!(
             "substeps: automatic, {} ({limit} for ζ in [{:.3}, {:.3}], ω_max = {:.4e} rad/s){}",
             c.substeps,
             c.zeta_range.0,
@@ -432,12 +495,15 @@ fn run(args: RunArgs) -> Result<(), String> {
         );
     }
     match sim.gpu_adapter() {
-        Some(adapter) => println!("backend: gpu, adapter {adapter}"),
-        None => println!("backend: cpu ({} thread(s))", rayon::current_num_threads()),
+        Some(adapter) => say!("backend: gpu, adapter {adapter}"),
+        None => say!("backend: cpu ({} thread(s))", rayon::current_num_threads()),
     }
     match ratio {
-        Some((r, k)) => println!("h/h_c of the stiffest spring: {r:.4} (spring {k}, h_c = π/ω0)"),
-        None => println!("h/h_c of the stiffest spring: no springs"),
+        Some((r, k)) => say!(
+            "h/h_c of the stiffest spring: {} (spring {k}, h_c = π/ω0)",
+            Readable::new(r, 4)
+        ),
+        None => say!("h/h_c of the stiffest spring: no springs"),
     }
     // Only the closed form aliases; the other integrators have nothing special at n h_c.
     let aliased = config
@@ -446,7 +512,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         .then(|| harmonic::internals::step_control::aliasing(packed, config.h(), 0.02))
         .flatten();
     if let Some((k, r)) = aliased {
-        println!(
+        say!(
             "warning: spring {k} is stepped at h/h_c = {r:.4}, within 2 % of a whole multiple of h_c: \
              its closed-form impulse vanishes (even) or reverses its stretch rate (odd) there"
         );
@@ -459,7 +525,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             (false, Backend::Gpu) => "on the CPU, the state read back every substep (shapes other than balls and cuboids, or attachments)",
             (false, _) => "on the CPU",
         };
-        println!(
+        say!(
             "props: {} bod(ies), contact thickness {} m, friction {} static / {} kinetic; rapier steps {}; contacts {stage}",
             p.bodies().len(),
             p.contact().thickness,
@@ -517,14 +583,14 @@ fn run(args: RunArgs) -> Result<(), String> {
     let done = sim.steps();
     let end = sim.diagnostics();
     let substeps = substeps_run;
-    println!(
+    say!(
         "steps: {done} frame(s), {substeps} substep(s), {:.4} s simulated in {wall:.3} s wall ({:.0} steps/s, {:.1} M spring-substeps/s)",
         sim.time(),
         done as f64 / wall,
         (m as f64 * substeps as f64) / wall / 1e6
     );
     if sim.props().is_some() {
-        println!(
+        say!(
             "contacts: {contacts} particle-collider contacts ({swept} by the swept test), deepest {max_depth:.3e} m inside; \
              stage time: integrate {:.3} s, contacts {:.3} s ({:.0} % of integrate)",
             t_integrate,
@@ -532,21 +598,21 @@ fn run(args: RunArgs) -> Result<(), String> {
             100.0 * t_contacts / t_integrate.max(1e-12)
         );
     }
-    println!(
-        "max strain: {:.4} % (the largest stretch δ/l0 over the run; compression apart: {:.4} %)",
-        100.0 * max_strain,
-        100.0 * max_compression
+    say!(
+        "max strain: {} % (the largest stretch δ/l0 over the run; compression apart: {} %)",
+        Readable::new(100.0 * max_strain, 4),
+        Readable::new(100.0 * max_compression, 4)
     );
-    println!("{}", summary::energy(&start, &end));
-    println!("{}", summary::audit(&end.audit, t_audit, t_integrate));
+    say!("{}", summary::energy(&start, &end));
+    say!("{}", summary::audit(&end.audit, t_audit, t_integrate));
     if let (Some(c), (changes, motion)) = (sim.step_choice(), sim.accuracy()) {
-        println!(
+        say!(
             "{}",
             summary::accuracy(c.substeps, sim.config().substeps, changes, motion)
         );
     }
     if let Some(bytes) = summary::peak_rss() {
-        println!(
+        say!(
             "memory: peak RSS {:.1} MiB for {n} particles and {m} springs (the process's whole footprint)",
             bytes as f64 / (1 << 20) as f64,
         );
@@ -563,7 +629,7 @@ fn run(args: RunArgs) -> Result<(), String> {
                 .take(8)
                 .map(|(i, _)| i.to_string())
                 .collect();
-            println!(
+            say!(
                 "non-finite: {} particle(s) quarantined (frozen at their last finite position), first at step {step}: {}{}",
                 quarantined.len(),
                 list.join(", "),
@@ -576,7 +642,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             ))
         }
         (None, None) => {
-            println!("non-finite: none");
+            say!("non-finite: none");
             Ok(())
         }
     }

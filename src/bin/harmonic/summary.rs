@@ -1,5 +1,6 @@
 //! The run summary's energy lines.
 
+use harmonic::internals::Readable;
 use harmonic::{Diagnostics, EnergyAudit};
 
 /// The energy at the start and end, as a share of the scene's energy scale.
@@ -7,8 +8,8 @@ pub fn energy(start: &Diagnostics, end: &Diagnostics) -> String {
     let scale = start.energy_scale;
     let relative = if scale > 0.0 {
         format!(
-            "{:+.3} % of the scene's energy scale, {scale:.4e} J",
-            100.0 * (end.energy - start.energy) / scale
+            "{} % of the scene's energy scale, {scale:.4e} J",
+            Readable::signed(100.0 * (end.energy - start.energy) / scale, 3)
         )
     } else {
         "no energy scale: the scene starts at rest and unstretched, with nothing to fall".into()
@@ -23,7 +24,7 @@ pub fn energy(start: &Diagnostics, end: &Diagnostics) -> String {
 pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     let share = |j: f64| {
         if a.scale > 0.0 {
-            format!(" ({:+.4} %)", 100.0 * j / a.scale)
+            format!(" ({} %)", Readable::signed(100.0 * j / a.scale, 4))
         } else {
             String::new()
         }
@@ -31,7 +32,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     format!(
         "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
          damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, quarantine {:.4e} J; \
-         attachments put in {:.4e} J, edits {:.4e} J; its passes took {seconds:.3} s ({:.1} % of \
+         attachments put in {:.4e} J, edits {:.4e} J; its passes took {seconds:.3} s ({} % of \
          integrate, where the grid pass books its dampers)",
         a.residual,
         share(a.residual),
@@ -43,7 +44,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
         a.quarantine,
         a.attachments,
         a.edits,
-        100.0 * seconds / integrate.max(1e-12)
+        Readable::new(100.0 * seconds / integrate.max(1e-12), 1)
     )
 }
 

@@ -6,6 +6,23 @@ use std::path::Path;
 
 use harmonic::Simulation;
 
+/// Whether `a` and `b` are one file (device and inode on Unix; the canonical paths
+/// elsewhere). A path that does not exist is no file yet.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (std::fs::metadata(a), std::fs::metadata(b)) {
+            (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
+    }
+}
+
 /// The file with its header and the state at step 0.
 pub fn create(path: &Path, sim: &Simulation) -> Result<BufWriter<File>, String> {
     let f = File::create(path).map_err(|e| format!("{}: {e}", path.display()))?;

@@ -339,17 +339,35 @@ fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
 /// The reference for a scene: RK4 at a quarter of its automatic step (an eighth on small scenes), and
 /// the RMS change from the run at twice that step (a bound on the reference's own error,
 /// about 1/15 of it for a fourth-order method).
-pub fn reference(packed: &Packed, g: DVec3) -> (Vec<DVec3>, u64, f64, f64) {
-    let factor = if packed.spring_count() > LARGE { 2 } else { 4 };
-    let n = factor * step_control::choose(packed, Integrator::Rk4, T).substeps as u64;
+/// Returns an error where the reference would blow up: it ran out of room in its step
+/// choice (the scene too stiff for RK4 at [`step_control::MAX_SUBSTEPS`] a second).
+pub fn reference(packed: &Packed, g: DVec3) -> Result<(Vec<DVec3>, u64, f64, f64), String> {
+    let n = reference_steps(packed)?;
+    let unstable = || "the RK4 reference blew up (a scene too stiff for its steps)".to_string();
     // `n` steps; the reference itself takes 2n.
     let a = simulate(packed, Integrator::Rk4, g, n, 1.0)
-        .expect("RK4 reference is stable")
+        .ok_or_else(unstable)?
         .0;
     let (b, max_strain, _, _) =
-        simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).expect("RK4 reference is stable");
+        simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).ok_or_else(unstable)?;
     let change = rms(&a, &b);
-    (b, 2 * n, change, max_strain)
+    Ok((b, 2 * n, change, max_strain))
+}
+
+/// The reference's coarser run's steps per simulated second; an error when RK4's stability
+/// floor alone passes [`step_control::MAX_SUBSTEPS`].
+pub fn reference_steps(packed: &Packed) -> Result<u64, String> {
+    let factor = if packed.spring_count() > LARGE { 2 } else { 4 };
+    let c = step_control::choose(packed, Integrator::Rk4, T);
+    if c.capped {
+        return Err(format!(
+            "the RK4 reference would need more than {} steps per simulated second \
+             (ω_max = {:.3e} rad/s); lower --stiffen",
+            step_control::MAX_SUBSTEPS,
+            c.omega_max
+        ));
+    }
+    Ok(factor * c.substeps as u64)
 }
 
 /// A scene's reference run: steps per second, RMS change when its step is halved, max strain.
@@ -403,12 +421,29 @@ impl Selection {
         if self.steps.contains(&0) {
             return Err("--steps: step counts must be ≥ 1".into());
         }
-        match self.stiffen {
-            Some(f) if !(f.is_finite() && f > 0.0) => {
-                Err(format!("--stiffen {f}: expected a finite factor > 0"))
-            }
-            _ => Ok(()),
+        let Some(f) = self.stiffen else {
+            return Ok(());
+        };
+        if !(f.is_finite() && f > 0.0) {
+            return Err(format!("--stiffen {f:?}: expected a finite factor > 0"));
         }
+        // Every stiffened scene must still be a scene, and its RK4 reference within reach.
+        let named = |c: &Case| self.scenes.is_empty() || self.scenes.iter().any(|s| s == c.name);
+        let chosen = cases(quick).into_iter().filter(named);
+        for case in chosen.chain(
+            extra_cases()
+                .into_iter()
+                .filter(|c| !self.scenes.is_empty() && named(c)),
+        ) {
+            let scene = stiffened(case.scene, f);
+            if let Some(issue) = scene.validate().first() {
+                return Err(format!("--stiffen {f:?}: {}: {issue}", case.name));
+            }
+            let packed = Packed::gather(&scene.build().world).map_err(|e| e.to_string())?;
+            reference_steps(&packed)
+                .map_err(|steps| format!("--stiffen {f:?}: {}: {steps}", case.name))?;
+        }
+        Ok(())
     }
 
     fn integrators(&self) -> Vec<Integrator> {
