@@ -90,7 +90,7 @@ fn a_damped_shipped_scene_keeps_its_substeps() {
 fn the_motion_check_measures_each_frame_against_twice_the_substeps() {
     let mut sim = Simulation::from_scene(&Scene::parse(&cloth(1.0 / 60.0), "c").unwrap()).unwrap();
     assert!(sim.accuracy().1.is_nan());
-    for _ in 0..2 {
+    for _ in 0..30 {
         sim.step().unwrap();
     }
     let (_, motion) = sim.accuracy();
@@ -242,5 +242,75 @@ fn a_frame_of_several_periods_is_taken_again_until_it_fits_the_tolerance() {
             sim.config().substeps > first,
             "{name}: no frame was taken again"
         );
+    }
+}
+
+/// A frame's own position error from `packed` with `integrator` at `substeps`, against the
+/// same frame at 64 times the substeps, as a share of the scene's size.
+fn frame_error(
+    packed: &harmonic::internals::Packed,
+    integrator: Integrator,
+    dt: f64,
+    substeps: u32,
+) -> f64 {
+    let g = glam::DVec3::new(0.0, -9.81, 0.0);
+    let run = |k: u32| {
+        let mut p = packed.clone();
+        let mut solver = harmonic::internals::Solver::new(integrator, false, g);
+        for _ in 0..k {
+            solver.substep(&mut p, dt / k as f64).unwrap();
+        }
+        p.x
+    };
+    let (coarse, fine) = (run(substeps), run(64 * substeps));
+    let (mut lo, mut hi) = (glam::DVec3::INFINITY, glam::DVec3::NEG_INFINITY);
+    for x in &packed.x {
+        (lo, hi) = (lo.min(*x), hi.max(*x));
+    }
+    let worst = (coarse.iter().zip(&fine))
+        .zip(&packed.inv_mass)
+        .filter(|(_, &w)| w != 0.0)
+        .map(|((a, b), _)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    worst / (hi - lo).length()
+}
+
+#[test]
+fn the_motion_check_measures_a_frames_own_error_over_the_frames_after_it() {
+    // Step doubling of a check frame, its second run spread over the next frames, against
+    // the frame's error measured at 64 times its substeps: at the release and mid-swing.
+    for (what, text) in [("chain", chain(1.0 / 60.0)), ("cloth", cloth(1.0 / 60.0))] {
+        let mut sim = Simulation::from_scene(&Scene::parse(&text, what).unwrap()).unwrap();
+        for check in [0, 30, 60] {
+            assert_eq!(sim.steps(), check);
+            let before = sim.packed().clone();
+            let stats = *sim.step().unwrap();
+            let c = *sim.config();
+            let actual = frame_error(&before, c.integrator, c.dt, stats.substeps);
+            // Measured over the frames after the check frame, not on it.
+            let mut done = None;
+            while sim.steps() < check + 30 {
+                let was = sim.accuracy().1;
+                sim.step().unwrap();
+                let now = sim.accuracy().1;
+                if now.to_bits() != was.to_bits() && done.is_none() {
+                    done = Some(sim.steps() - check);
+                }
+            }
+            let estimate = sim.accuracy().1;
+            println!(
+                "{what}, check at frame {check}: {} substeps, estimate {estimate:.3e}, actual \
+                 {actual:.3e} ({:.2}×), measured {} frames on",
+                stats.substeps,
+                estimate / actual,
+                done.unwrap_or(0)
+            );
+            assert!(
+                (0.5..=2.0).contains(&(estimate / actual)),
+                "{what} at frame {check}: {estimate:e} against {actual:e}"
+            );
+            // Eight frames after the check frame at most.
+            assert!(done.is_some_and(|d| d <= 9), "{done:?}");
+        }
     }
 }

@@ -199,7 +199,8 @@ fn check_locates_errors_and_fails() {
         "{stderr}"
     );
     assert!(stderr.contains("2 of 3 scene(s) invalid"), "{stderr}");
-    assert!(String::from_utf8_lossy(&out.stdout).contains("scenes/chain.ron: ok (21 particles)"));
+    assert!(String::from_utf8_lossy(&out.stdout)
+        .contains("scenes/chain.ron: ok (21 particles, 3000 frame(s) for `run`)"));
     let missing = harmonic(&["check", "scenes/does_not_exist.ron"]);
     assert_eq!(missing.status.code(), Some(2));
     assert!(

@@ -456,3 +456,50 @@ fn a_run_shorter_than_one_frame_is_refused() {
         &["seconds", "shorter than one frame (dt 10.0 s)"],
     );
 }
+
+#[test]
+fn check_refuses_what_run_refuses_before_its_first_frame_in_the_same_words() {
+    let chain = std::fs::read_to_string(CHAIN).unwrap();
+    for (name, text, needle) in [
+        (
+            "long.ron",
+            chain.replace("seconds: 3.0", "seconds: 1e300"),
+            "seconds",
+        ),
+        (
+            "tiny.ron",
+            chain.replace("dt: 0.001", "dt: 1e-12"),
+            "seconds",
+        ),
+        (
+            "work.ron",
+            chain
+                .replace("substeps: 8", "substeps: 100000")
+                .replace("seconds: 3.0", "seconds: 1000.0"),
+            "--max-run-substeps",
+        ),
+    ] {
+        let path = scene_file(name, &text);
+        let p = path.to_str().unwrap();
+        let check = harmonic(&["check", p]);
+        let run = harmonic(&["run", p]);
+        let (c, r) = (
+            String::from_utf8_lossy(&check.stderr),
+            String::from_utf8_lossy(&run.stderr),
+        );
+        assert_eq!(check.status.code(), Some(2), "{name}: {c}");
+        assert_eq!(run.status.code(), Some(2), "{name}: {r}");
+        assert!(
+            c.contains(needle) && r.contains(needle),
+            "{name}:\n{c}\n{r}"
+        );
+        // The same message, from the same code: check's line names the file, run's is the
+        // error itself.
+        let message = |s: &str| {
+            let at = s.find("the scene's seconds").expect("names the entry");
+            s[at..].lines().next().unwrap().to_string()
+        };
+        assert_eq!(message(&c), message(&r), "{name}");
+        assert!(c.contains(&format!("{p}: the scene's seconds")), "{c}");
+    }
+}

@@ -133,3 +133,52 @@ fn a_particle_follows_one_body() {
         "already attached by attachments[0]",
     );
 }
+
+#[test]
+fn bodies_and_particles_stay_within_the_worlds_bound() {
+    // Bodies run in rapier's f32: poses, speeds and sizes past the documented bounds are
+    // refused where they are written, not met later as "a step too large".
+    let kinematic = "(kind: KinematicPosition, shape: Ball(radius: 0.3), \
+                     path: [(time: 0.0, position: (0.0, 0.0, 0.0)), (time: 1.0, position: (1e300, 0.0, 0.0))])";
+    let i = issues(&with_bodies(kinematic, "(particle: Particle(1), body: 0)"));
+    has(&i, "bodies[0].path[1].position", "beyond the world's bound");
+    let fast = "(kind: Kinematic, shape: Ball(radius: 0.3), velocity: (1e20, 0.0, 0.0))";
+    let i = issues(&with_bodies(fast, "(particle: Particle(1), body: 0)"));
+    has(&i, "bodies[0].velocity", "beyond the world's bound of ±1e4");
+    let far = "(kind: Fixed, position: (0.0, 1e300, 0.0), shape: Ball(radius: 0.3))";
+    has(
+        &issues(&with_bodies(far, "")),
+        "bodies[0].position",
+        "±1e5 m",
+    );
+    let huge = "(kind: Fixed, shape: Ball(radius: 1e300))";
+    has(
+        &issues(&with_bodies(huge, "")),
+        "bodies[0].shape.radius",
+        "1e5 m",
+    );
+    // Not "encloses no volume": too large, and said so.
+    let i = issues(&with_bodies(
+        "(kind: Dynamic, shape: Ball(radius: 1e30))",
+        "",
+    ));
+    has(&i, "bodies[0].shape.radius", "beyond the world's bound");
+    assert!(i.iter().all(|m| !m.contains("no volume")), "{i:#?}");
+    // Within the bound, but its mass and inertia (m r²) past f32's range.
+    let dense = "(kind: Dynamic, density: 1e15, shape: Ball(radius: 1e5))";
+    has(
+        &issues(&with_bodies(dense, "")),
+        "bodies[0]",
+        "beyond f32's range",
+    );
+    // The largest sound ball still builds.
+    let sound = "(kind: Dynamic, shape: Ball(radius: 1e5))";
+    Scene::parse(&with_bodies(sound, ""), "big.ron").expect("within every bound");
+    // Particles: named by their entry, never by an internal spring id.
+    let i = issues(
+        "Scene(dt: 0.01, particles: [(position: (-1e308, 0.0, 0.0), mass: 1.0), \
+         (position: (1e308, 0.0, 0.0), mass: 1.0)], springs: [(a: 0, b: 1, stiffness: 1.0)])",
+    );
+    has(&i, "particles[0].position", "beyond the world's bound");
+    has(&i, "particles[1].position", "beyond the world's bound");
+}

@@ -2,24 +2,30 @@
 //! the limits can be raised.
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 use harmonic::scene::Limits;
 use harmonic::{Scene, SceneError, SimError, Simulation};
 
-/// Tracks the most bytes live at once.
+/// Tracks the most bytes live at once, per thread: the tests of this file run side by side,
+/// and each measures only its own allocations.
 struct Peak;
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static LIVE: Cell<isize> = const { Cell::new(0) };
+    static PEAK: Cell<isize> = const { Cell::new(0) };
+}
 
 unsafe impl GlobalAlloc for Peak {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let live = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-        PEAK.fetch_max(live, Ordering::Relaxed);
+        let size = layout.size() as isize;
+        let _ = LIVE.try_with(|live| {
+            live.set(live.get() + size);
+            let _ = PEAK.try_with(|peak| peak.set(peak.get().max(live.get())));
+        });
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+        let _ = LIVE.try_with(|live| live.set(live.get() - layout.size() as isize));
         unsafe { System.dealloc(ptr, layout) }
     }
 }
@@ -42,10 +48,10 @@ fn messages(e: SceneError) -> String {
 fn huge_generators_are_refused_before_allocating() {
     for (n, what) in [(1_000_000u64, "particles"), (40_000, "particles")] {
         let text = cloth(n);
-        let before = LIVE.load(Ordering::Relaxed);
-        PEAK.store(before, Ordering::Relaxed);
+        let before = LIVE.with(Cell::get);
+        PEAK.with(|p| p.set(before));
         let err = Scene::parse(&text, "huge.ron").unwrap_err();
-        let peak = PEAK.load(Ordering::Relaxed) - before;
+        let peak = PEAK.with(Cell::get) - before;
         let msg = messages(err);
         assert!(msg.contains(&format!("asks for {} {what}", n * n)), "{msg}");
         assert!(msg.contains("the limit is 4194304"), "{msg}");

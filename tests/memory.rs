@@ -4,9 +4,10 @@
 //! - the grid: at most 150 bytes per particle with symplectic Euler and fixed substeps, its
 //!   springs included, and 200 with the closed form (whose dampers the energy audit books after
 //!   each substep from a copy of the state at its start, 48 B);
-//! - the default path (no integrator named, automatic substeps, past the first motion checks):
-//!   the grid plus the accuracy controller's own state, a frame-start copy (48 B) and the
-//!   motion check's probe (12 B), at most 210 bytes per particle.
+//! - the default path (no integrator named, automatic substeps, a motion check under way): the
+//!   grid plus the accuracy controller's own state, at most 240 bytes per particle. That state
+//!   is a frame-start copy (48 B), the motion check's second run between frames (its state in
+//!   f32, 24 B, and the check frame's end, 12 B) and its solver's band scratch.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -74,7 +75,8 @@ fn a_cloth_costs_at_most_150_bytes_per_particle() {
     // An integrator that needs the springs one by one, for scale.
     let expanded = peak_per_particle(n, Some(Integrator::HarmonicGs), false, 2);
     // What a scene gets that names neither: the integrator chosen on the simulation's own
-    // gather, the substeps by the accuracy controller, through two motion checks.
+    // gather, the substeps by the accuracy controller, a motion check measured and the next
+    // one under way.
     let path = peak_per_particle(n, None, true, 32);
     let controller = path - default;
     println!(
@@ -83,12 +85,12 @@ fn a_cloth_costs_at_most_150_bytes_per_particle() {
          {path:.1} B, of which the accuracy controller's state {controller:.1} B"
     );
     assert!(
-        path <= 210.0,
+        path <= 240.0,
         "the default path peaks at {path:.1} B per particle"
     );
-    // Its frame-start copy (48 B) and probe (12 B), and nothing the size of a second cloth.
+    // 48 + 24 + 12 B and a little scratch; nothing the size of a second cloth.
     assert!(
-        controller <= 64.0,
+        controller <= 90.0,
         "the controller's state takes {controller:.1} B per particle"
     );
     assert!(

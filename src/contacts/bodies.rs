@@ -23,6 +23,17 @@ pub fn path_pose(path: &[Keyframe], t: f64) -> Pose {
 }
 
 /// The rapier collider of a shape, or why the shape is unusable.
+/// A body's collider with its mass: the body's `mass`, else its `density` (default 1000
+/// kg/m³) over the shape's volume.
+pub(crate) fn massive_collider_of(b: &BodyDef) -> Result<ColliderBuilder, String> {
+    let co = collider_of(&b.shape)?;
+    Ok(match (b.mass, b.density) {
+        (Some(m), _) => co.mass(m as f32),
+        (None, Some(d)) => co.density(d as f32),
+        (None, None) => co.density(1000.0),
+    })
+}
+
 pub(crate) fn collider_of(shape: &Shape) -> Result<ColliderBuilder, String> {
     Ok(match shape {
         Shape::Ball { radius } => ColliderBuilder::ball(*radius as f32),
@@ -115,15 +126,10 @@ impl Props {
         .angvel(v3(b.angular_velocity))
         .linear_damping(b.linear_damping as f32)
         .angular_damping(b.angular_damping as f32);
-        let mut co = collider_of(&b.shape)
+        let co = massive_collider_of(b)
             .map_err(|e| format!("shape: {e}"))?
             .friction(b.friction as f32)
             .restitution(b.restitution as f32);
-        co = match (b.mass, b.density) {
-            (Some(m), _) => co.mass(m as f32),
-            (None, Some(d)) => co.density(d as f32),
-            (None, None) => co.density(1000.0),
-        };
         let body = physics.bodies.insert(builder);
         let collider = physics
             .colliders

@@ -116,6 +116,16 @@ impl Limits {
     }
 }
 
+/// The world's bound (m): every position a scene gives (particles, cloth and rope ends,
+/// bodies, keyframes, shape points) lies within ±1e5 m of the origin on each axis, and every
+/// size within 1e5 m. Bodies run in rapier's f32, which resolves 8 mm there; a game whose
+/// world is larger moves its origin with the player.
+pub const WORLD_BOUND: f64 = 1e5;
+
+/// The speed bound: every velocity a scene gives (m/s, and body spins in rad/s) lies within
+/// ±1e4 on each axis, faster than any projectile a cloth meets.
+pub const SPEED_BOUND: f64 = 1e4;
+
 /// The largest file [`Scene::load`] reads (256 MiB): a scene is text, and a device or a pipe
 /// that never ends (`/dev/zero`) is refused by name instead of read until memory runs out.
 pub const MAX_FILE_BYTES: u64 = 256 << 20;
@@ -180,7 +190,8 @@ pub struct Scene {
     /// Gravitational acceleration (m/s²); `(0, −9.81, 0)` when absent.
     #[serde(default = "default_gravity")]
     pub gravity: V3,
-    /// Integrator name; the engine's default (`symplectic-euler`) when absent.
+    /// Integrator name; when absent the engine chooses by rule, the cheaper within the
+    /// tolerance of `symplectic-euler` and `harmonic` ([`crate::SimConfig::auto_integrator`]).
     #[serde(default)]
     pub integrator: Option<String>,
     /// Back end: `"cpu"` (the default), `"gpu"` or `"auto"`; the CLI's `--backend` overrides it.

@@ -1,6 +1,6 @@
 //! Semantic checks; each problem names its entry.
 
-use super::{Anchor, Limits, Scene, SpringSpec, V3};
+use super::{Anchor, Limits, Scene, SpringSpec, SPEED_BOUND, V3, WORLD_BOUND};
 use crate::error::Issue;
 use crate::integrate::Integrator;
 
@@ -35,6 +35,37 @@ impl Issues {
     fn finite(&mut self, location: impl Into<String>, v: V3) {
         if !v.iter().all(|c| c.is_finite()) {
             self.push(location, format!("must be finite, got {v:?}"));
+        }
+    }
+    /// A point: finite, each coordinate within [`WORLD_BOUND`].
+    fn point(&mut self, location: impl Into<String>, v: V3) {
+        self.bounded(location, v, WORLD_BOUND, "m (WORLD_BOUND)");
+    }
+    /// A velocity: finite, each component within [`SPEED_BOUND`].
+    fn speed(&mut self, location: impl Into<String>, v: V3) {
+        self.bounded(location, v, SPEED_BOUND, "m/s or rad/s (SPEED_BOUND)");
+    }
+    fn bounded(&mut self, location: impl Into<String>, v: V3, bound: f64, unit: &str) {
+        let location = location.into();
+        let before = self.0.len();
+        self.finite(location.clone(), v);
+        if self.0.len() == before && v.iter().any(|c| c.abs() > bound) {
+            self.push(
+                location,
+                format!("{v:?} is beyond the world's bound of ±{bound:e} {unit}"),
+            );
+        }
+    }
+    /// A length: finite, > 0 and within [`WORLD_BOUND`].
+    fn size(&mut self, location: impl Into<String>, v: f64) {
+        let location = location.into();
+        let before = self.0.len();
+        self.positive(location.clone(), v);
+        if self.0.len() == before && v > WORLD_BOUND {
+            self.push(
+                location,
+                format!("{v:?} is beyond the world's bound of {WORLD_BOUND:e} m (WORLD_BOUND)"),
+            );
         }
     }
     /// An axis-angle rotation: finite, its angle at most [`crate::contacts::MAX_ANGLE`] (it is
@@ -155,8 +186,8 @@ impl Scene {
             is.positive("seconds", t);
         }
         for (i, p) in self.particles.iter().enumerate() {
-            is.finite(format!("particles[{i}].position"), p.position);
-            is.finite(format!("particles[{i}].velocity"), p.velocity);
+            is.point(format!("particles[{i}].position"), p.position);
+            is.speed(format!("particles[{i}].velocity"), p.velocity);
             is.positive(format!("particles[{i}].mass"), p.mass);
         }
         let n = self.particles.len();
@@ -196,10 +227,10 @@ impl Scene {
         }
         for (i, c) in self.cloths.iter().enumerate() {
             let at = format!("cloths[{i}]");
-            is.finite(format!("{at}.origin"), c.origin);
-            is.finite(format!("{at}.velocity"), c.velocity);
-            is.positive(format!("{at}.size.0"), c.size.0);
-            is.positive(format!("{at}.size.1"), c.size.1);
+            is.point(format!("{at}.origin"), c.origin);
+            is.speed(format!("{at}.velocity"), c.velocity);
+            is.size(format!("{at}.size.0"), c.size.0);
+            is.size(format!("{at}.size.1"), c.size.1);
             is.positive(format!("{at}.mass"), c.mass);
             let (cols, rows) = c.resolution;
             if cols < 2 || rows < 2 {
@@ -235,8 +266,8 @@ impl Scene {
         }
         for (i, r) in self.ropes.iter().enumerate() {
             let at = format!("ropes[{i}]");
-            is.finite(format!("{at}.start"), r.start);
-            is.finite(format!("{at}.end"), r.end);
+            is.point(format!("{at}.start"), r.start);
+            is.point(format!("{at}.end"), r.end);
             is.positive(format!("{at}.mass"), r.mass);
             if r.particles < 2 {
                 is.push(
@@ -274,10 +305,10 @@ impl Scene {
         use super::props::{ParticleRef, Shape};
         for (i, b) in self.bodies.iter().enumerate() {
             let at = format!("bodies[{i}]");
-            is.finite(format!("{at}.position"), b.position);
+            is.point(format!("{at}.position"), b.position);
             is.rotation(format!("{at}.rotation"), b.rotation);
-            is.finite(format!("{at}.velocity"), b.velocity);
-            is.finite(format!("{at}.angular_velocity"), b.angular_velocity);
+            is.speed(format!("{at}.velocity"), b.velocity);
+            is.speed(format!("{at}.angular_velocity"), b.angular_velocity);
             match (b.mass, b.density) {
                 (Some(_), Some(_)) => is.push(&at, "give `mass` or `density`, not both"),
                 (Some(m), None) => is.positive(format!("{at}.mass"), m),
@@ -305,7 +336,7 @@ impl Scene {
             let mut last = f64::NEG_INFINITY;
             for (k, key) in b.path.iter().enumerate() {
                 let kt = format!("{at}.path[{k}]");
-                is.finite(format!("{kt}.position"), key.position);
+                is.point(format!("{kt}.position"), key.position);
                 is.rotation(format!("{kt}.rotation"), key.rotation);
                 if !(key.time.is_finite() && key.time >= 0.0 && key.time > last) {
                     is.push(
@@ -320,10 +351,10 @@ impl Scene {
             }
             let sh = format!("{at}.shape");
             match &b.shape {
-                Shape::Ball { radius } => is.positive(format!("{sh}.radius"), *radius),
+                Shape::Ball { radius } => is.size(format!("{sh}.radius"), *radius),
                 Shape::Cuboid { half_extents } => {
                     for (k, h) in half_extents.iter().enumerate() {
-                        is.positive(format!("{sh}.half_extents[{k}]"), *h);
+                        is.size(format!("{sh}.half_extents[{k}]"), *h);
                     }
                 }
                 Shape::Capsule {
@@ -334,12 +365,12 @@ impl Scene {
                     half_height,
                     radius,
                 } => {
-                    is.positive(format!("{sh}.half_height"), *half_height);
-                    is.positive(format!("{sh}.radius"), *radius);
+                    is.size(format!("{sh}.half_height"), *half_height);
+                    is.size(format!("{sh}.radius"), *radius);
                 }
                 Shape::ConvexHull { points } => {
                     for (k, p) in points.iter().enumerate() {
-                        is.finite(format!("{sh}.points[{k}]"), *p);
+                        is.point(format!("{sh}.points[{k}]"), *p);
                     }
                     if points.len() < 4 {
                         is.push(
@@ -350,7 +381,7 @@ impl Scene {
                 }
                 Shape::TriMesh { vertices, indices } => {
                     for (k, p) in vertices.iter().enumerate() {
-                        is.finite(format!("{sh}.vertices[{k}]"), *p);
+                        is.point(format!("{sh}.vertices[{k}]"), *p);
                     }
                     if indices.is_empty() {
                         is.push(&sh, "a triangle mesh needs ≥ 1 triangle");
@@ -365,7 +396,7 @@ impl Scene {
                     }
                 }
                 Shape::HeightField { heights, scale } => {
-                    is.finite(format!("{sh}.scale"), *scale);
+                    is.point(format!("{sh}.scale"), *scale);
                     let cols = heights.first().map_or(0, Vec::len);
                     if heights.len() < 2 || cols < 2 {
                         is.push(&sh, "a height field needs ≥ 2 rows and ≥ 2 columns");
@@ -377,13 +408,20 @@ impl Scene {
                                 format!("has {} columns, row 0 has {cols}", row.len()),
                             );
                         }
-                        if row.iter().any(|h| !h.is_finite()) {
-                            is.push(format!("{sh}.heights[{r}]"), "must be finite");
+                        if row
+                            .iter()
+                            .any(|h| !(h.is_finite() && h.abs() <= WORLD_BOUND))
+                        {
+                            is.push(
+                                format!("{sh}.heights[{r}]"),
+                                format!("must be finite and within ±{WORLD_BOUND:e} (WORLD_BOUND)"),
+                            );
                         }
                     }
                 }
             }
-            if is.0.iter().all(|e| !e.location.starts_with(&sh)) {
+            let sound = |is: &Issues| is.0.iter().all(|e| !e.location.starts_with(&at));
+            if sound(is) {
                 match crate::contacts::collider_of(&b.shape) {
                     Err(e) => is.push(&sh, e),
                     // rapier gives a dynamic body the mass of its shape's volume; with none,
@@ -400,6 +438,41 @@ impl Scene {
                         }
                     }
                     Ok(_) => {}
+                }
+            }
+            // rapier steps a dynamic body in f32: its mass and inertia (m r²) must fit.
+            if sound(is) && b.kind == super::props::BodyKind::Dynamic {
+                let of = |co: rapier3d::prelude::ColliderBuilder| {
+                    let mp = co.build().mass_properties();
+                    (mp.mass(), mp.principal_inertia())
+                };
+                let unit = crate::contacts::collider_of(&b.shape).map(|c| of(c.density(1.0)));
+                if let (Ok(co), Ok(unit)) = (crate::contacts::massive_collider_of(b), unit) {
+                    let (m, inertia) = of(co);
+                    // Past f32's range a value is infinite, or stored as an inverse of 0 and
+                    // read back as 0 where the shape has some.
+                    let lost =
+                        |v: f32, u: f32| !v.is_finite() || v >= f32::MAX || (u > 0.0 && v <= 0.0);
+                    let inertia_lost = (inertia.to_array().into_iter())
+                        .zip(unit.1.to_array())
+                        .any(|(v, u)| lost(v, u));
+                    if lost(m, 1.0) || inertia_lost {
+                        // What they would be, in f64: the unit-density values scaled.
+                        let scale = match (b.mass, b.density) {
+                            (Some(mass), _) => mass / f64::from(unit.0),
+                            (None, Some(d)) => d,
+                            (None, None) => 1000.0,
+                        };
+                        is.push(
+                            &at,
+                            format!(
+                                "a mass of {:.3e} kg and an inertia of {:.3e} kg·m², beyond \
+                                 f32's range (rapier's precision): a smaller body, mass or density",
+                                scale * f64::from(unit.0),
+                                scale * f64::from(unit.1.max_element())
+                            ),
+                        );
+                    }
                 }
             }
         }

@@ -18,11 +18,12 @@
 //! - Down: after [`CALM_FRAMES`] frames in which the residual rose by less than 1/32 of the
 //!   tolerance and the last motion check within a quarter of its bound, they halve, never
 //!   below the stability floor.
-//! - The motion check, every [`CHECK_EVERY`] frames on scenes without bodies on the CPU, steps
-//!   the frame again from its start at twice the substeps and compares the positions: for a
-//!   first-order step the frame's own error is about twice their difference (step doubling).
-//!   It catches what the energy misses: a step that conserves energy but runs slow in phase,
-//!   or one that damps the motion away.
+//! - The motion check ([`super::motion`]), every [`CHECK_EVERY`] frames on scenes without
+//!   bodies on the CPU, steps the check frame again from its start at twice the substeps,
+//!   spread over the 8 frames that follow, and compares the positions: for a first-order step
+//!   the frame's own error is about twice their difference (step doubling). It catches what
+//!   the energy misses: a step that conserves energy but runs slow in phase, or one that damps
+//!   the motion away.
 //! - Retry: on the CPU without bodies or a step budget, a frame whose own energy error would lift the
 //!   cumulative residual more than half the tolerance above its low is taken again from its
 //!   start at twice the substeps, until it fits or the substeps reach their cap. A long frame
@@ -58,12 +59,11 @@ pub(super) struct Controller {
     pub(super) motion: f64,
     /// Substep changes made so far (a frame taken again included).
     pub(super) changes: u32,
-    /// The start of a frame being checked, and where twice the substeps took it (f32: the
-    /// comparison needs far less than f64's precision).
-    start: (Vec<DVec3>, Vec<DVec3>),
-    probe: Vec<Vec3>,
-    /// The check's own solver, prepared for half the step once (the frame's keeps its own).
-    solver: Option<Solver>,
+    /// The start of a frame that may be taken again or is checked; between frames, the
+    /// motion check's scratch.
+    pub(super) start: (Vec<DVec3>, Vec<DVec3>),
+    /// The motion check under way.
+    pub(super) probe: super::motion::Probe,
 }
 
 impl Controller {
@@ -82,13 +82,17 @@ impl Controller {
             (hi - lo).length()
         };
         self.motion = f64::NAN;
-        if let Some(s) = &mut self.solver {
-            s.invalidate();
-        }
+        // A check under way was of the old buffers.
+        self.probe.abandon();
     }
 }
 
 impl Controller {
+    /// The scene's size (m), as of the last gather.
+    pub(super) fn size(&self) -> f64 {
+        self.size
+    }
+
     /// The first frame's substeps for `choice` (the stability floor) and a share `f` of the
     /// energy scale in motion and stretch, for the first-order explicit steps (the others'
     /// error is damping, or the closed form's is not first order in `ω h`).
@@ -107,48 +111,6 @@ impl Controller {
 }
 
 impl Simulation {
-    /// Whether this frame is a motion check's: automatic substeps, the CPU, no bodies.
-    fn checks_motion(&self) -> bool {
-        #[cfg(feature = "gpu")]
-        if self.gpu.is_some() {
-            return false;
-        }
-        self.config.auto_substeps
-            && self.props.is_none()
-            && self.user_stage.is_none()
-            && self.steps.is_multiple_of(CHECK_EVERY)
-            && !self.packed.x.is_empty()
-    }
-
-    /// Before a frame: on a check frame, steps it at twice the substeps from its start and
-    /// keeps where that took the particles, then puts the start back.
-    pub(super) fn probe_motion(&mut self) -> Result<bool, SimError> {
-        if !self.checks_motion() {
-            return Ok(false);
-        }
-        let c = &mut self.controller;
-        let p = &mut self.packed;
-        c.start.0.clone_from(&p.x);
-        c.start.1.clone_from(&p.v);
-        let h = self.config.h() / 2.0;
-        let steps = 2 * self.config.substeps;
-        let run =
-            |solver: &mut Solver, p: &mut Packed| (0..steps).try_for_each(|_| solver.substep(p, h));
-        let result = if self.parallel {
-            rayon::scope(|_| run(&mut self.solver, p))
-        } else {
-            run(&mut self.solver, p)
-        };
-        c.probe.clear();
-        c.probe.extend(p.x.iter().map(|x| x.as_vec3()));
-        p.x.clone_from(&c.start.0);
-        p.v.clone_from(&c.start.1);
-        // Back to the frame's own step.
-        self.solver.prepare(p, self.config.h())?;
-        result?;
-        Ok(true)
-    }
-
     /// After a frame's books: the substeps for the next frame.
     pub(super) fn adapt(&mut self, probed: bool) {
         if !self.config.auto_substeps {
@@ -157,19 +119,6 @@ impl Simulation {
         let run = self.auditor.run;
         let tol = self.config.tolerance * run.scale;
         let c = &mut self.controller;
-        if probed {
-            let worst = (self.packed.x.iter().zip(&c.probe))
-                .zip(&self.packed.inv_mass)
-                .filter(|(_, &w)| w != 0.0)
-                .map(|((x, q), _)| (x.as_vec3() - *q).length() as f64)
-                .fold(0.0, f64::max);
-            // A first-order step: the frame's error is about twice the difference.
-            c.motion = if c.size > 0.0 {
-                2.0 * worst / c.size
-            } else {
-                0.0
-            };
-        }
         c.since += 1;
         c.low = c.low.min(run.residual);
         // A rise, not a fall: a steady loss (numerical damping, the step's error at particles
@@ -218,7 +167,7 @@ impl Simulation {
 }
 
 impl Controller {
-    /// Keeps the frame's start, for [`Self::rejects`] (frames that may be retried only).
+    /// Keeps the frame's start, for [`Self::rejects`] and the motion check.
     pub(super) fn keep_start(&mut self, packed: &Packed) {
         self.start.0.clone_from(&packed.x);
         self.start.1.clone_from(&packed.v);

@@ -27,6 +27,7 @@ mod accuracy;
 mod coupling;
 mod edit;
 mod frame;
+mod motion;
 mod quarantine;
 mod step;
 

@@ -65,7 +65,7 @@ impl Simulation {
         let t1 = Instant::now();
         self.open_books(edited);
         let mut audit_time = t1.elapsed();
-        let probed = self.probe_motion()?;
+        let probing = self.checks_motion();
         let h = self.config.h();
         let substeps = self.config.substeps;
         let mut coupling = match (user, self.props.as_mut(), self.user_stage.as_mut()) {
@@ -130,7 +130,7 @@ impl Simulation {
         // retry would have to wind back.
         let retry =
             self.config.auto_substeps && !self.config.step_budget.is_finite() && coupling.is_none();
-        if retry {
+        if retry || probing {
             self.controller.keep_start(&self.packed);
         }
         let tol = self.config.tolerance * self.energy_scale;
@@ -214,8 +214,6 @@ impl Simulation {
         } else {
             integrate()?;
         }
-        // A retried frame took more substeps; the motion check's probe was for the old ones.
-        let probed = probed && substeps == self.config.substeps;
         self.config.substeps = substeps;
         let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
         self.finish_frame(
@@ -226,6 +224,14 @@ impl Simulation {
             beyond,
             (end, projections),
         )?;
+        // The motion check: begun after its frame, its second run advanced a share after
+        // each frame that follows.
+        let t = Instant::now();
+        let probed = self.advance_probe()?;
+        if probing {
+            self.begin_probe(substeps);
+        }
+        self.stats.integrate += t.elapsed();
         self.adapt(probed);
         Ok(&self.stats)
     }

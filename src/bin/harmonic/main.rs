@@ -54,10 +54,13 @@ struct Cli {
 enum Command {
     /// Run a scene headless and print a summary.
     Run(RunArgs),
-    /// Load and validate scenes; print every problem with its location.
+    /// Load and validate scenes, and build each as `run` would (without stepping): print every
+    /// problem with its location.
     Check {
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
+        #[command(flatten)]
+        limits: LimitArgs,
     },
     /// Render a scene headless to PNG with wgpu offscreen (a software adapter such as Mesa's
     /// lavapipe works): shaded cloth, rigid bodies, a floor grid.
@@ -221,7 +224,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),
-        Command::Check { scenes } => check(&scenes),
+        Command::Check { scenes, limits } => check(&scenes, &limits.limits()),
         Command::Render(args) => render(args),
     };
     match result {
@@ -360,14 +363,13 @@ fn render(_: RenderArgs) -> Result<(), String> {
     Err(harmonic::GpuError::NotBuilt.to_string())
 }
 
-fn check(paths: &[PathBuf]) -> Result<(), String> {
+fn check(paths: &[PathBuf], limits: &Limits) -> Result<(), String> {
     let mut bad = 0;
     for path in paths {
-        match Scene::load(path) {
-            Ok(scene) => say!(
-                "{}: ok ({} particles)",
-                path.display(),
-                scene.particle_count()
+        match checked(path, limits) {
+            Ok((particles, frames)) => say!(
+                "{}: ok ({particles} particles, {frames} frame(s) for `run`)",
+                path.display()
             ),
             Err(e) => {
                 eprintln!("{e}");
@@ -380,6 +382,16 @@ fn check(paths: &[PathBuf]) -> Result<(), String> {
     } else {
         Err(format!("{bad} of {} scene(s) invalid", paths.len()))
     }
+}
+
+/// What `run` does before its first frame, on one scene: load and validate it, build the
+/// simulation, and take the run's length; its particles and frames, or the first problem.
+fn checked(path: &std::path::Path, limits: &Limits) -> Result<(usize, u64), String> {
+    let scene = Scene::load_with(path, limits).map_err(|e| e.to_string())?;
+    let at = |e: String| format!("{}: {e}", path.display());
+    let sim = Simulation::from_scene_with(&scene, limits).map_err(|e| at(e.to_string()))?;
+    let frames = frames(None, None, scene.seconds, sim.config(), limits).map_err(at)?;
+    Ok((sim.positions().len(), frames))
 }
 
 fn run(args: RunArgs) -> Result<(), String> {

@@ -51,7 +51,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
 /// What the accuracy controller made of the substeps.
 pub fn accuracy(floor: u32, now: u32, changes: u32, motion: f64) -> String {
     let check = if motion.is_nan() {
-        "no motion check (bodies, or the GPU)".to_string()
+        "no motion check measured (bodies, the GPU, or a run too short for one)".to_string()
     } else {
         format!(
             "last motion check {:.3e} % of the scene's size per frame",
