@@ -112,7 +112,8 @@ impl Controller {
 
 impl Simulation {
     /// After a frame's books: the substeps for the next frame.
-    pub(super) fn adapt(&mut self, probed: bool) {
+    /// `probed`: the substeps of the frame a motion check just finished measuring.
+    pub(super) fn adapt(&mut self, probed: Option<u32>) {
         if !self.config.auto_substeps {
             return;
         }
@@ -127,7 +128,9 @@ impl Simulation {
         let substeps = self.config.substeps;
         let energy_up = tol > 0.0 && c.rise > 0.25 * tol;
         // A NaN error (the probe blew up) counts as past the bound.
-        let motion_up = probed && (c.motion > MOTION_TOLERANCE || c.motion.is_nan());
+        // A verdict on fewer substeps than the frames take now has been acted on already.
+        let motion_up = probed.is_some_and(|n| n >= substeps)
+            && (c.motion > MOTION_TOLERANCE || c.motion.is_nan());
         let calm = c.since >= CALM_FRAMES
             && (tol <= 0.0 || c.rise < tol / 32.0)
             && c.motion <= MOTION_TOLERANCE / 4.0;

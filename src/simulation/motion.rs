@@ -22,6 +22,8 @@ pub(super) struct Probe {
     left: u32,
     /// Half-steps taken after each frame.
     share: u32,
+    /// The check frame's substeps.
+    substeps: u32,
     /// The half-step (s).
     h: f64,
     /// The second run's state between frames.
@@ -73,17 +75,18 @@ impl Simulation {
         store(&mut p.end, &self.packed.x);
         store(&mut p.x, &c.start.0);
         store(&mut p.v, &c.start.1);
+        p.substeps = substeps;
         p.left = 2 * substeps;
         p.share = p.left.div_ceil(PROBE_FRAMES);
         p.h = self.config.dt / f64::from(p.left);
     }
 
-    /// After a frame: the check's next share of half-steps; whether it finished, with the
-    /// motion error set.
-    pub(super) fn advance_probe(&mut self) -> Result<bool, SimError> {
+    /// After a frame: the check's next share of half-steps; when it finished, the motion
+    /// error set and the check frame's substeps.
+    pub(super) fn advance_probe(&mut self) -> Result<Option<u32>, SimError> {
         let c = &mut self.controller;
         if c.probe.left == 0 {
-            return Ok(false);
+            return Ok(None);
         }
         let n = self.packed.x.len();
         let size = c.size();
@@ -124,6 +127,6 @@ impl Simulation {
         }
         std::mem::swap(&mut p.x, &mut start.0);
         std::mem::swap(&mut p.v, &mut start.1);
-        result.map(|()| done)
+        result.map(|()| done.then_some(pr.substeps))
     }
 }
