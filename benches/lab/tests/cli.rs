@@ -97,6 +97,27 @@ fn throughput_refuses_cloths_it_cannot_time() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--repeats 0"));
 }
 
+/// Runs the lab, killing it (and failing) after 60 s.
+fn timed(args: &[&str]) -> std::process::Output {
+    use std::process::Stdio;
+    use std::time::{Duration, Instant};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_harmonic-lab"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("runs");
+    let start = Instant::now();
+    while child.try_wait().expect("waits").is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("harmonic-lab {args:?} still running after 60 s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().expect("output")
+}
+
 #[test]
 fn absurd_factors_and_durations_are_refused_not_panicked_on() {
     let dir = std::env::temp_dir().join(format!("harmonic-lab-hostile-{}", std::process::id()));
@@ -126,7 +147,8 @@ fn absurd_factors_and_durations_are_refused_not_panicked_on() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
     for seconds in ["NaN", "0", "inf", "-1"] {
-        let out = harmonic_lab(&["stability", &format!("--seconds={seconds}")]);
+        // Killed after 60 s: a hang (the suite over an endless case) fails here.
+        let out = timed(&["stability", &format!("--seconds={seconds}")]);
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "--seconds {seconds}: {stderr}");
         assert!(stderr.contains("--seconds"), "{stderr}");
