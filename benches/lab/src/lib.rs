@@ -3,7 +3,8 @@
 //! The measuring apparatus of `harmonic`, kept out of the engine a game embeds: speed against
 //! error ([`accuracy`]), the hard-case stability suite ([`stability`]), static equilibria
 //! ([`statics`]), step throughput ([`throughput`]), rapier 0.36's soft-body cloth as a peer
-//! ([`peer`]) and the GPU bench (`gpu_bench`). The `harmonic-lab` binary runs them; the figures
+//! ([`peer`]), the GPU bench (`gpu_bench`) and a bit-for-bit record of the engine's results for
+//! refactors that must change nothing ([`baseline`]). The `harmonic-lab` binary runs them; the figures
 //! they write are in `BENCHMARKS.md` and `STABILITY.md` beside this crate.
 //!
 //! It uses the engine through its public API and, where it needs the packed buffers and the
@@ -13,6 +14,7 @@
 #![allow(clippy::expect_used, clippy::unwrap_used)]
 
 pub mod accuracy;
+pub mod baseline;
 #[cfg(feature = "gpu")]
 pub mod gpu_bench;
 pub mod peer;

@@ -92,6 +92,23 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         integrators: Vec<String>,
     },
+    /// A bit-for-bit record of what the engine computes (every scene of --scenes and hard case
+    /// for 150 frames, each game integrator on the chain and the hanging cloth, `step_with`, the
+    /// GPU): write it before a refactor that must change nothing, check against it after.
+    Baseline {
+        /// Record the runs into this file.
+        #[arg(long, conflicts_with = "check", required_unless_present = "check")]
+        write: Option<PathBuf>,
+        /// Run again and compare with this file; exit 2 naming each run's first difference.
+        #[arg(long)]
+        check: Option<PathBuf>,
+        /// The folder of shipped scenes.
+        #[arg(long, default_value = "scenes")]
+        scenes: PathBuf,
+        /// Only the runs whose name contains this (`hard/…` for the hard cases).
+        #[arg(long)]
+        only: Option<String>,
+    },
     /// A cloth scene draped on one fixed ball, run by this engine (CPU) and by rapier 0.36's own
     /// soft-body cloth on the same ball, side by side: wall time, strain, penetration.
     DrapePeer {
@@ -179,6 +196,12 @@ fn main() -> ExitCode {
                 );
             }),
         Command::DrapePeer { scene } => drape_peer(&scene),
+        Command::Baseline {
+            write,
+            check,
+            scenes,
+            only,
+        } => baseline(write.as_deref(), check.as_deref(), &scenes, only.as_deref()),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -187,6 +210,43 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
     }
+}
+
+fn baseline(
+    write: Option<&std::path::Path>,
+    check: Option<&std::path::Path>,
+    scenes: &std::path::Path,
+    only: Option<&str>,
+) -> Result<(), String> {
+    use harmonic_lab::baseline;
+    let recorded = match check {
+        Some(path) => {
+            Some(std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?)
+        }
+        None => None,
+    };
+    let runs = baseline::runs(scenes, only)?;
+    let count = runs.iter().filter(|r| r.1 == "end").count();
+    if let Some(path) = write {
+        std::fs::write(path, baseline::write(&runs))
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        println!("wrote {count} runs to {}", path.display());
+    }
+    if let (Some(text), Some(path)) = (recorded, check) {
+        let differences = baseline::differences(&text, &runs);
+        for d in &differences {
+            println!("{d}");
+        }
+        if !differences.is_empty() {
+            return Err(format!(
+                "{} difference(s) from {} ({count} runs)",
+                differences.len(),
+                path.display()
+            ));
+        }
+        println!("{count} runs, the same bits as {}", path.display());
+    }
+    Ok(())
 }
 
 /// The throughput flags, refused before anything is built: a cloth of at least 2×2, at most

@@ -155,3 +155,53 @@ fn absurd_factors_and_durations_are_refused_not_panicked_on() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_baseline_holds_its_own_bits_and_names_a_change() {
+    let dir = std::env::temp_dir().join(format!("harmonic-baseline-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("baseline.txt");
+    let f = file.to_str().unwrap();
+    let scenes = concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes");
+    let baseline = |how: &str| {
+        harmonic_lab(&[
+            "baseline",
+            how,
+            f,
+            "--scenes",
+            scenes,
+            "--only",
+            "scenes/chain.ron",
+        ])
+    };
+    // One shipped scene: quick, and the same bits run again.
+    let write = baseline("--write");
+    assert!(
+        write.status.success(),
+        "{}",
+        String::from_utf8_lossy(&write.stderr)
+    );
+    let check = baseline("--check");
+    let stdout = String::from_utf8_lossy(&check.stdout);
+    assert!(
+        check.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&check.stderr)
+    );
+    assert!(stdout.contains("1 runs, the same bits"), "{stdout}");
+    // One frame's state changed in the record: named, with its frame, and exit 2.
+    let text = std::fs::read_to_string(&file).unwrap();
+    let states = text.lines().find(|l| l.contains("\tstates\t")).unwrap();
+    let hashes: Vec<&str> = states.rsplit('\t').next().unwrap().split(',').collect();
+    assert_eq!(hashes.len(), 150);
+    let changed = states.replacen(hashes[40], "0000000000000000", 1);
+    std::fs::write(&file, text.replace(states, &changed)).unwrap();
+    let check = baseline("--check");
+    let stdout = String::from_utf8_lossy(&check.stdout);
+    assert_eq!(check.status.code(), Some(2));
+    assert!(
+        stdout.contains("scenes/chain.ron: states differ first at frame 40"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
