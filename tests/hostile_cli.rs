@@ -8,12 +8,14 @@ use std::time::{Duration, Instant};
 
 /// Runs the binary, killing it (and failing) after 60 s: a hang is a failure, not a stall.
 fn harmonic(args: &[&str]) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_harmonic"))
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("runs");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_harmonic"));
+    command.args(args).stdout(Stdio::piped());
+    within_a_minute(command, args)
+}
+
+/// Runs `command` with its stderr piped, killing it (and failing) after 60 s.
+fn within_a_minute(mut command: Command, args: &[&str]) -> Output {
+    let mut child = command.stderr(Stdio::piped()).spawn().expect("runs");
     let start = Instant::now();
     while child.try_wait().expect("waits").is_none() {
         if start.elapsed() > Duration::from_secs(60) {
@@ -186,24 +188,14 @@ fn render_refuses_absurd_pictures_before_drawing() {
 /// Runs the binary under a 4 GiB address-space limit (a run that would take more fails here
 /// instead of taking the machine down), with its stdout sent to `stdout`.
 fn capped(args: &[&str], stdout: Stdio) -> Output {
-    let mut child = Command::new("sh")
+    let mut command = Command::new("sh");
+    command
         .arg("-c")
         .arg("ulimit -v 4194304; exec \"$0\" \"$@\"")
         .arg(env!("CARGO_BIN_EXE_harmonic"))
         .args(args)
-        .stdout(stdout)
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("runs");
-    let start = Instant::now();
-    while child.try_wait().expect("waits").is_none() {
-        if start.elapsed() > Duration::from_secs(60) {
-            let _ = child.kill();
-            panic!("harmonic {args:?} still running after 60 s");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child.wait_with_output().expect("output")
+        .stdout(stdout);
+    within_a_minute(command, args)
 }
 
 #[test]
