@@ -1,5 +1,6 @@
 // The contact stage on the device, for balls and cuboids: the WGSL form of
-// src/contacts.rs (`ContactStage::contacts`, `surface`, `respond`, `support`), run after each
+// src/contacts/stage.rs (`ContactStage::contacts`, `Hit`) and src/contacts/queries.rs (`surface`,
+// `respond`, `support`), run after each
 // substep's integrate passes over the same position and velocity buffers. The CPU stage asks
 // parry for projections and ray casts; here they are written out for the two shapes, and
 // tests/gpu.rs holds the two against each other. Each workgroup sums what its particles did
@@ -159,7 +160,7 @@ fn cast_local(c: Collider, p: vec3<f32>, d: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(n, near);
 }
 
-// Mirrors contacts::Hit.
+// Mirrors contacts::stage::Hit.
 struct Hit {
     found: bool,
     point: vec3<f32>,
@@ -168,7 +169,7 @@ struct Hit {
     swept: bool,
 }
 
-// Mirrors contacts::surface.
+// Mirrors contacts::queries::surface.
 fn surface(c: Collider, x0: vec3<f32>, x1: vec3<f32>, fast: bool, thickness: f32) -> Hit {
     let q = c.rotation;
     let t = c.translation.xyz;
@@ -268,7 +269,7 @@ fn contact_pass(
             let n = hit.normal;
             let body_mass = col.com.w;
             if col.dynamic != 0u && supported {
-                // Mirrors contacts::support.
+                // Mirrors contacts::queries::support.
                 let rel = v - velocity_at(col, hit.point);
                 let vn = dot(rel, n);
                 let overlap = max(th - dot(x - hit.point, n), 0.0);
@@ -290,7 +291,7 @@ fn contact_pass(
             supported = supported || col.dynamic == 0u;
             x = hit.point + n * th;
             moved = true;
-            // Mirrors contacts::respond.
+            // Mirrors contacts::queries::respond.
             let vb = velocity_at(col, hit.point);
             let rel = v - vb;
             let vn = dot(rel, n);

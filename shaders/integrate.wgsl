@@ -1,5 +1,5 @@
 // The GPU step: the WGSL mirror of src/integrate/mod.rs (spring_pass, particle_pass),
-// src/integrate/grid.rs (the cloth grid pass) and src/integrate/gauss_seidel.rs (add_gravity,
+// src/integrate/grid/ (the cloth grid pass: mod.rs, band.rs) and src/integrate/gauss_seidel.rs (add_gravity,
 // sweep, drift). Each function names its Rust mirror;
 // tests/gpu.rs holds the two together. No atomics: every particle gathers its springs' changes
 // over a CSR list, so GL and Vulkan adapters both work and results are deterministic.
@@ -7,7 +7,7 @@
 // State is f32. A position is hi + lo (a compensated pair) so that a drift h·v below half an
 // ulp of x still moves the particle (a 2 m tall cloth at h = 5e-5 s moves 2e-8 m per step).
 
-// Specialisation, chosen per scene at gather (src/gpu/mod.rs, `Specialisation`).
+// Specialisation, chosen per scene at gather (src/gpu/pipelines.rs, `Specialisation`).
 override WORKGROUP: u32 = 256u;
 // Some spring responds to its stretch rate (q ≠ 0); false for undamped Euler springs.
 override RATE: bool = true;
@@ -155,7 +155,7 @@ fn spring_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
     sdv[k] = vec4<f32>(guard(r.w * r.xyz, e, va, vb), 0.0);
 }
 
-// The GPU form of grid::Ctx::band_rows for one grid: each particle sums −φ n / m over the links that
+// The GPU form of grid::band's band_rows for one grid: each particle sums −φ n / m over the links that
 // reach it, from either end (each spring is evaluated at both its ends, with n pointing away
 // from the particle), into sdv[params.springs + i] for particle_pass.
 @compute @workgroup_size(WORKGROUP)

@@ -1,4 +1,4 @@
-// Drawing a simulation (src/render.rs): lit two-sided meshes (cloth and rigid bodies), unlit
+// Drawing a simulation (src/render/renderer.rs): lit two-sided meshes (cloth and rigid bodies), unlit
 // lines (ropes, wireframe) and a procedural floor grid. Positions arrive in world space.
 
 struct View {

@@ -172,3 +172,28 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         );
     }
 }
+
+/// Every source path a shader names as its mirror (`src/…`) exists: a moved module takes its
+/// shader's pointer with it.
+#[test]
+fn the_paths_the_shaders_name_exist() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut named = 0;
+    for file in shader_files() {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for (at, _) in text.match_indices("src/") {
+            let path: String = text[at..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || matches!(c, '/' | '_' | '.' | '-'))
+                .collect();
+            let path = path.trim_end_matches('.');
+            named += 1;
+            assert!(
+                root.join(path).exists(),
+                "{} names {path}, which does not exist",
+                file.display()
+            );
+        }
+    }
+    assert!(named >= 5, "{named} paths named");
+}
