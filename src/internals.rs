@@ -39,6 +39,18 @@ pub mod gpu {
     pub use crate::gpu::*;
 }
 
+/// For a headless binary's `main`, before any thread starts: Mesa's Vulkan device-select layer
+/// probes for a Wayland display while adapters are listed, and libwayland prints an error where
+/// there is no session (no `XDG_RUNTIME_DIR`), on every headless render. The engine ranks the
+/// adapters itself, so the layer is switched off there (`NODEVICE_SELECT=1`) unless the
+/// environment says otherwise. Sets an environment variable: not for a library's callers.
+pub fn quiet_headless_adapters() {
+    let unset = |k: &str| std::env::var_os(k).is_none();
+    if unset("XDG_RUNTIME_DIR") && unset("NODEVICE_SELECT") {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+}
+
 /// An `n`×`n` hanging cloth, 1 kg over 1 m × 1 m, structural + shear + bend, pinned at the two
 /// top corners (128×128: 16,384 particles, 97,026 springs).
 pub fn hanging_cloth(n: u32) -> Scene {

@@ -75,10 +75,19 @@ fn record(
     ]
 }
 
+/// The hard cases' names begin so.
+const HARD: &str = "hard/";
+
+/// Whether `--only` keeps the run `name`: its name contains it, and a hard case only where it
+/// begins `hard/` (the hard cases are not made otherwise).
+fn wanted(name: &str, only: Option<&str>) -> bool {
+    only.is_none_or(|o| name.contains(o) && (!name.starts_with(HARD) || o.starts_with(HARD)))
+}
+
 /// The runs, by name: each builds its simulation and records it. `only` keeps the runs whose
 /// name contains it (the hard cases only where it begins `hard/`).
 pub fn runs(scenes: &Path, only: Option<&str>) -> Result<Vec<(String, String, String)>, String> {
-    let wanted = |name: &str| only.is_none_or(|o| name.contains(o));
+    let wanted = |name: &str| wanted(name, only);
     let mut out = Vec::new();
     let mut push = |name: String, lines: Vec<(&'static str, String)>| {
         for (k, v) in lines {
@@ -106,9 +115,9 @@ pub fn runs(scenes: &Path, only: Option<&str>) -> Result<Vec<(String, String, St
         }
     }
     // Their equilibrium starts take minutes to find: made only where they may be wanted.
-    let hard = only.is_none_or(|o| o.starts_with("hard/"));
+    let hard = only.is_none_or(|o| o.starts_with(HARD));
     for (file, scene) in hard.then(crate::stability::hard_scenes).unwrap_or_default() {
-        let name = format!("hard/{file}");
+        let name = format!("{HARD}{file}");
         if wanted(&name) {
             push(name, built(&scene, |_| {}));
         }
@@ -191,11 +200,17 @@ pub fn write(runs: &[(String, String, String)]) -> String {
 }
 
 /// Every difference between a recorded baseline and this run, one line each (empty: the
-/// same bits): a run missing or new, or the first frame whose substeps or state differ.
-pub fn differences(recorded: &str, runs: &[(String, String, String)]) -> Vec<String> {
+/// same bits): a run missing or new, or the first frame whose substeps or state differ. With
+/// `only`, the recorded runs it would not keep are passed over.
+pub fn differences(
+    recorded: &str,
+    runs: &[(String, String, String)],
+    only: Option<&str>,
+) -> Vec<String> {
     let parse = |text: &str| -> BTreeMap<(String, String), String> {
         text.lines()
             .filter(|l| !l.starts_with('#') && !l.is_empty())
+            .filter(|l| wanted(l.split('\t').next().unwrap_or(""), only))
             .filter_map(|l| {
                 let mut parts = l.splitn(3, '\t');
                 let (name, key) = (parts.next()?, parts.next()?);

@@ -212,15 +212,8 @@ struct RunArgs {
 }
 
 fn main() -> ExitCode {
-    // Mesa's Vulkan device-select layer probes for a Wayland display while listing adapters,
-    // and libwayland prints an error where there is no session (no XDG_RUNTIME_DIR): every
-    // headless render would print it. The adapter is chosen here by rank, not by that layer.
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none()
-        && std::env::var_os("NODEVICE_SELECT").is_none()
-    {
-        // Before any thread starts.
-        std::env::set_var("NODEVICE_SELECT", "1");
-    }
+    // Before any thread starts.
+    harmonic::internals::quiet_headless_adapters();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Run(args) => run(args),
