@@ -49,6 +49,8 @@ impl Progress {
         }
     }
 
+    /// A line to stdout above the bar (`render`'s, so unused without the GPU back end).
+    #[cfg_attr(not(feature = "gpu"), allow(dead_code))]
     pub fn println(&self, line: String) -> Result<(), String> {
         match &self.bar {
             Some(b) => b.println(line),
