@@ -420,8 +420,9 @@ impl Scene {
                     }
                 }
             }
-            let sound = |is: &Issues| is.0.iter().all(|e| !e.location.starts_with(&at));
-            if sound(is) {
+            // The shape's own checks, then (mass and density sound too) the body's mass.
+            let sound = |is: &Issues, of: &str| is.0.iter().all(|e| !e.location.starts_with(of));
+            if sound(is, &sh) {
                 match crate::contacts::collider_of(&b.shape) {
                     Err(e) => is.push(&sh, e),
                     // rapier gives a dynamic body the mass of its shape's volume; with none,
@@ -441,7 +442,7 @@ impl Scene {
                 }
             }
             // rapier steps a dynamic body in f32: its mass and inertia (m r²) must fit.
-            if sound(is) && b.kind == super::props::BodyKind::Dynamic {
+            if sound(is, &at) && b.kind == super::props::BodyKind::Dynamic {
                 let of = |co: rapier3d::prelude::ColliderBuilder| {
                     let mp = co.build().mass_properties();
                     (mp.mass(), mp.principal_inertia())
