@@ -4,7 +4,8 @@
 //! error ([`accuracy`]), the hard-case stability suite ([`stability`]), static equilibria
 //! ([`statics`]), step throughput ([`throughput`]), rapier 0.36's soft-body cloth as a peer
 //! ([`peer`]), the GPU bench (`gpu_bench`) and a bit-for-bit record of the engine's results for
-//! refactors that must change nothing ([`baseline`]). The `harmonic-lab` binary runs them; the figures
+//! refactors that must change nothing ([`baseline`]) with the frame times beside it
+//! ([`frame_time`]). The `harmonic-lab` binary runs them; the figures
 //! they write are in `BENCHMARKS.md` and `STABILITY.md` beside this crate.
 //!
 //! It uses the engine through its public API and, where it needs the packed buffers and the
@@ -15,6 +16,7 @@
 
 pub mod accuracy;
 pub mod baseline;
+pub mod frame_time;
 #[cfg(feature = "gpu")]
 pub mod gpu_bench;
 pub mod peer;

@@ -109,6 +109,16 @@ enum Command {
         #[arg(long)]
         only: Option<String>,
     },
+    /// Mean wall time per frame at fixed substeps, one line per timed run: for comparing two
+    /// builds side by side (alternate their binaries; set RAYON_NUM_THREADS).
+    FrameTime {
+        /// chain, cloth16, stiff128 or cloth1024.
+        #[arg(long)]
+        case: String,
+        /// Timed runs after one untimed run.
+        #[arg(long, default_value_t = 1)]
+        repeats: u32,
+    },
     /// A cloth scene draped on one fixed ball, run by this engine (CPU) and by rapier 0.36's own
     /// soft-body cloth on the same ball, side by side: wall time, strain, penetration.
     DrapePeer {
@@ -198,6 +208,12 @@ fn main() -> ExitCode {
                 );
             }),
         Command::DrapePeer { scene } => drape_peer(&scene),
+        Command::FrameTime { case, repeats } => harmonic_lab::frame_time::measure(&case, repeats)
+            .map(|runs| {
+                for t in runs {
+                    println!("{case}\t{:.6e}", t);
+                }
+            }),
         Command::Baseline {
             write,
             check,
