@@ -28,8 +28,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut integrate, mut contacts) = (0.0, 0.0);
     for f in 1..=frames {
         let s = *sim.step()?;
-        integrate += s.integrate.as_secs_f64();
-        contacts += s.contacts.as_secs_f64();
+        integrate += s.stages[StageKind::Integrate].as_secs_f64();
+        contacts += s.stages[StageKind::Contacts].as_secs_f64();
         if f % report_every == 0 || f == frames {
             let d = sim.diagnostics();
             let touching = sim.contact_stats().map_or(0, |c| c.contacts);

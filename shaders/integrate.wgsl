@@ -17,6 +17,9 @@ override PINS: bool = true;
 override UPDATE: u32 = 0u;
 // Cloth grids are kept whole (grid_pass runs); false when every spring is in `ends`.
 override GRIDS: bool = false;
+// The schedule lists a force stage: each particle's external acceleration (gravity included)
+// is `accel[i]`, not `params.gravity` (the CPU's integrate::External).
+override FORCES: bool = false;
 
 struct Params {
     gravity: vec3<f32>,
@@ -78,6 +81,16 @@ struct Range {
 @group(0) @binding(5) var<storage, read_write> sdv: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read> offsets: array<u32>;
 @group(0) @binding(7) var<storage, read> entries: array<Entry>;
+// The external acceleration per particle, xyz (FORCES only; one unread element otherwise).
+@group(0) @binding(9) var<storage, read> accel: array<vec4<f32>>;
+
+// Mirrors integrate::External::at: particle i's external acceleration.
+fn external_accel(i: u32) -> vec3<f32> {
+    if FORCES {
+        return accel[i].xyz;
+    }
+    return params.gravity;
+}
 @group(0) @binding(8) var<uniform> colour: Range;
 
 // A 2-D grid of workgroups (one dimension stops at 65,535) read as one index.
@@ -219,18 +232,19 @@ fn particle_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_work
         dv += en.coef * sdv[en.spring].xyz;
     }
     let h = params.h;
+    let g = external_accel(i);
     var v = vel[i];
     if UPDATE == 0u {
-        v = vec4<f32>(v.xyz + dv + params.gravity * h, v.w);
+        v = vec4<f32>(v.xyz + dv + g * h, v.w);
         drift_by(i, h * v.xyz);
     } else {
         drift_by(i, h * v.xyz);
-        v = vec4<f32>(v.xyz + dv + params.gravity * h, v.w);
+        v = vec4<f32>(v.xyz + dv + g * h, v.w);
     }
     vel[i] = v;
 }
 
-// Mirrors gauss_seidel::add_gravity: v += g h on free particles.
+// Mirrors gauss_seidel::add_gravity: v += g h on free particles (g the external acceleration).
 @compute @workgroup_size(WORKGROUP)
 fn add_gravity(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let i = linear(id, groups);
@@ -238,7 +252,7 @@ fn add_gravity(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgr
         return;
     }
     let v = vel[i];
-    vel[i] = vec4<f32>(v.xyz + params.gravity * params.h, v.w);
+    vel[i] = vec4<f32>(v.xyz + external_accel(i) * params.h, v.w);
 }
 
 // Mirrors gauss_seidel::sweep for one colour: springs of a colour share no particle, so each

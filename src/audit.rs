@@ -20,7 +20,8 @@ pub(crate) const BLOCK: usize = 4096;
 /// ([`crate::Diagnostics::audit`]), in joules. The audited system is the cloth: its energy
 /// `E = Σ ½ m|v|² − Σ m g·x + Σ ½ κ δ²` over free particles and all springs. Over a frame
 ///
-/// `E₁ − E₀ = edits + attachments − damping − contacts − friction − quarantine + residual`.
+/// `E₁ − E₀ = edits + attachments + forces − damping − contacts − friction − quarantine +
+/// residual`.
 ///
 /// Each line is discrete work: a damper's force over a substep does `h F·(v₀ + v₁)/2` over the
 /// particles' velocities at the step's start and end, with `F` the force the step applied:
@@ -43,6 +44,9 @@ pub struct EnergyAudit {
     pub edits: f64,
     /// Put in by attached particles following their bodies, within the frame.
     pub attachments: f64,
+    /// Put in by the game's forces ([`crate::Simulation::set_forces`]) within the frame: their
+    /// work `Σ F·Δx` over the integrate stage's moves (as gravity's is part of `E`).
+    pub forces: f64,
     /// Dissipated by the springs' dampers (≥ 0 for dampers with `c ≥ 0`).
     pub damping: f64,
     /// Removed by the contacts' push-out and their normal velocity change (work by a moving
@@ -77,6 +81,7 @@ impl EnergyAudit {
     fn lines_add(&mut self, o: &EnergyAudit) {
         self.edits += o.edits;
         self.attachments += o.attachments;
+        self.forces += o.forces;
         self.damping += o.damping;
         self.contacts += o.contacts;
         self.friction += o.friction;
@@ -178,6 +183,8 @@ pub struct Auditor {
     /// Whether the pass after each substep has dampers to book: loose springs, or cloth
     /// grids whose pass does not book its own.
     pub damped: bool,
+    /// Whether the frame books the work of per-particle forces (the start positions kept).
+    forced: bool,
     /// The grids' dampers are booked by the grid pass.
     grids_booked: bool,
     parallel: bool,
@@ -279,12 +286,41 @@ impl Auditor {
         particles + springs
     }
 
-    /// Keeps the state at a substep's start, for [`Self::damping`] after it.
+    /// Keeps the state at a substep's start, for [`Self::damping`] and [`Self::force_work`]
+    /// after it.
     pub fn begin_substep(&mut self, packed: &Packed) {
         if self.damped {
             self.x0.copy_from_slice(&packed.x);
             self.v0.copy_from_slice(&packed.v);
+        } else if self.forced {
+            self.x0.copy_from_slice(&packed.x);
         }
+    }
+
+    /// Whether this frame has per-particle forces whose work to book (the start positions are
+    /// kept for them).
+    pub fn set_forced(&mut self, forced: bool, particles: usize) {
+        self.forced = forced;
+        if forced {
+            self.x0.resize(particles, DVec3::ZERO);
+        }
+    }
+
+    /// Books the work of the forces `f` (N, packed order, constant over the frame) over the
+    /// moves since [`Self::begin_substep`]: `Σ F·(x₁ − x₀)` over free particles, in fixed
+    /// order.
+    pub fn force_work(&mut self, packed: &Packed, f: &[DVec3]) {
+        let x0 = std::mem::take(&mut self.x0);
+        let (x1, inv) = (&packed.x, &packed.inv_mass);
+        let work = self.particle_sum(packed.particle_count(), |i| {
+            if inv[i] == 0.0 {
+                0.0
+            } else {
+                f[i].dot(x1[i] - x0[i])
+            }
+        });
+        self.x0 = x0;
+        self.frame.forces += work;
     }
 
     /// What the dampers dissipated over the substep of `h` just taken (from the state
@@ -341,8 +377,10 @@ impl Auditor {
         f.attachments = projections.attachments;
         f.contacts = projections.contacts;
         f.friction = projections.friction;
-        let unexplained =
-            end - f.start - f.edits - f.attachments + f.damping + f.contacts + f.friction;
+        let unexplained = end - f.start - f.edits - f.attachments - f.forces
+            + f.damping
+            + f.contacts
+            + f.friction;
         if quarantined || !unexplained.is_finite() {
             f.quarantine = -unexplained;
         } else {

@@ -118,6 +118,22 @@ pub enum SimError {
     /// [`crate::Simulation::advance`] was given a frame time that is not finite and ≥ 0.
     #[error("frame time must be finite and ≥ 0, got {0:?}")]
     BadFrameTime(f64),
+    /// [`crate::Simulation::set_forces`] was not given one force per particle.
+    #[error("set_forces: {given} force(s) for {particles} particle(s); give one per particle, in scene order")]
+    ForceCount {
+        /// Forces given.
+        given: usize,
+        /// Particles in the simulation.
+        particles: usize,
+    },
+    /// [`crate::Simulation::set_forces`] was given a force that is not finite.
+    #[error("set_forces: the force on particle {index} is not finite: {force:?} N")]
+    BadForce {
+        /// The particle (scene order).
+        index: usize,
+        /// The force given (N).
+        force: [f64; 3],
+    },
     /// `SimConfig::strain_limit` is not > 0.
     #[error("strain limit must be > 0 (infinite: not checked), got {0:?}")]
     BadStrainLimit(f64),

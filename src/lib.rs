@@ -68,7 +68,7 @@ pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
-pub use schedule::{Failure, StepStats};
+pub use schedule::{Cadence, Failure, Schedule, Stage, StageKind, StageTimes, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
 pub use step_control::StepChoice;
 
@@ -81,7 +81,7 @@ pub use rapier3d;
 pub mod prelude {
     pub use crate::{
         Advance, Backend, Body, BodyKind, Diagnostics, Integrator, Particle, Pin, Scene, Shape,
-        SimConfig, Simulation, Spring, StepStats,
+        SimConfig, Simulation, Spring, StageKind, StepStats,
     };
     pub use glam::DVec3;
 }

@@ -37,12 +37,33 @@ fn run_prints_a_summary_and_writes_the_trajectory() {
         "max strain",
         "energy: start",
         "non-finite: none",
+        "\nschedule: gravity → integrate (symplectic-euler, 8 substeps) → quarantine\n",
     ] {
         assert!(
             stdout.contains(needle),
             "summary lacks {needle:?}:\n{stdout}"
         );
     }
+    // Each stage's share of the frame time, the shares summing to 100 %.
+    let shares = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("frame time: "))
+        .and_then(|l| l.split_once(" by stage: "))
+        .map(|(_, s)| s)
+        .unwrap_or_else(|| panic!("no frame time line:\n{stdout}"));
+    let mut total = 0.0;
+    for part in shares.split(", ") {
+        let (name, share) = part.split_once(' ').expect("name share");
+        assert!(
+            ["integrate", "quarantine", "audit", "gather", "scatter"].contains(&name),
+            "{name} in {shares}"
+        );
+        total += share
+            .trim_end_matches(" %")
+            .parse::<f64>()
+            .expect("a share");
+    }
+    assert!((total - 100.0).abs() < 0.1, "{shares}");
     let text = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("step,time,particle,x,y,z,vx,vy,vz"));

@@ -84,4 +84,21 @@ fn stepping_allocates_nothing() {
         game_loop, 0,
         "advance + render allocated {game_loop} times in 120 frames"
     );
+    // The game's forces, set anew every frame: the force stage and its books allocate nothing.
+    let mut forces = vec![DVec3::ZERO; sim.positions().len()];
+    sim.set_forces(&forces).unwrap();
+    sim.step().unwrap();
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for i in 0..120 {
+        for (k, f) in forces.iter_mut().enumerate() {
+            *f = DVec3::new(1e-3 * (i + k % 7) as f64, 0.0, 0.0);
+        }
+        sim.set_forces(&forces).unwrap();
+        sim.step().unwrap();
+    }
+    let forced = ALLOCS.load(Ordering::Relaxed) - before;
+    assert_eq!(
+        forced, 0,
+        "set_forces + step allocated {forced} times in 120 frames"
+    );
 }

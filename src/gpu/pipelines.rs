@@ -47,6 +47,8 @@ pub struct Specialisation {
     pub update: u32,
     /// Cloth grids are kept whole: `particle_pass` adds what `grid_pass` summed.
     pub grids: bool,
+    /// A force stage is listed: the external acceleration is read per particle.
+    pub forces: bool,
 }
 
 impl Specialisation {
@@ -72,6 +74,7 @@ impl Specialisation {
             pins: packed.inv_mass.contains(&0.0),
             update: u32::from(integrator == Integrator::ExplicitEuler),
             grids: !packed.topology.grids.is_empty(),
+            forces: false,
         }
     }
 
@@ -84,13 +87,14 @@ impl Specialisation {
         }
     }
 
-    pub(super) fn constants(&self) -> [(&'static str, f64); 5] {
+    pub(super) fn constants(&self) -> [(&'static str, f64); 6] {
         [
             ("WORKGROUP", WORKGROUP as f64),
             ("RATE", f64::from(u8::from(self.rate))),
             ("PINS", f64::from(u8::from(self.pins))),
             ("UPDATE", self.update as f64),
             ("GRIDS", f64::from(u8::from(self.grids))),
+            ("FORCES", f64::from(u8::from(self.forces))),
         ]
     }
 }

@@ -23,6 +23,10 @@ pub struct GpuSolver {
     pub(super) h: f32,
     /// The contact stage on the device, when the scene's colliders allow it.
     pub(super) contacts: Option<contacts::DeviceContacts>,
+    /// Step submits so far ([`Self::submits`]).
+    pub(super) submits: u64,
+    /// Host scratch for the external accelerations ([`Self::set_accel`]).
+    pub(super) host_accel: Vec<[f32; 4]>,
 }
 
 impl GpuSolver {
@@ -65,6 +69,7 @@ impl GpuSolver {
                     storage(6, true),
                     storage(7, true),
                     uniform(8, true),
+                    storage(9, true),
                 ],
             });
             let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -89,6 +94,8 @@ impl GpuSolver {
             host_vel: Vec::new(),
             h: f32::NAN,
             contacts: None,
+            submits: 0,
+            host_accel: Vec::new(),
         })
     }
 
@@ -141,7 +148,35 @@ impl GpuSolver {
         Ok(())
     }
 
-    /// The device contact stage, when enabled.
+    /// The frame's external accelerations (packed order, gravity included) for a solver
+    /// uploaded with forces; a device whose buffers have no room for them refuses them.
+    pub fn set_accel(&mut self, accel: &[DVec3]) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        if !self.pipelines.as_ref().is_some_and(|p| p.spec.forces)
+            || accel.len() != b.particles as usize
+        {
+            return Err(GpuError::Device {
+                adapter: self.ctx.describe(),
+                what: "external accelerations for a solver uploaded without forces".into(),
+            });
+        }
+        self.host_accel.clear();
+        self.host_accel
+            .extend(accel.iter().map(|a| a.as_vec3().extend(0.0).to_array()));
+        self.ctx
+            .queue
+            .write_buffer(&b.accel, 0, bytemuck::cast_slice(&self.host_accel));
+        Ok(())
+    }
+
+    /// Whether the contact stage runs on the device.
+    pub fn has_contacts(&self) -> bool {
+        self.contacts.is_some()
+    }
+
+    /// The contact stage on the device, when enabled.
     pub fn contacts(&mut self) -> Option<&mut contacts::DeviceContacts> {
         self.contacts.as_mut()
     }
@@ -158,6 +193,13 @@ impl GpuSolver {
         }
     }
 
+    /// How many step submits ([`Self::run_slots`]) the solver has made: a frame's count is
+    /// what its schedule asks (one for all its substeps unless a stage needs the host between
+    /// them).
+    pub fn submits(&self) -> u64 {
+        self.submits
+    }
+
     /// Encodes `substeps` substeps into one submit. Nothing is read back.
     pub fn run(&mut self, substeps: u32) -> Result<(), GpuError> {
         self.run_slots(0, substeps)
@@ -168,6 +210,7 @@ impl GpuSolver {
         let (Some(b), Some(p)) = (&self.buffers, &self.pipelines) else {
             return Ok(());
         };
+        self.submits += 1;
         let contacts = self.contacts.as_ref();
         if let Some(c) = contacts {
             c.flush(&self.ctx.queue);

@@ -10,6 +10,8 @@ pub(super) struct Buffers {
     pub(super) coefs: wgpu::Buffer,
     pub(super) sdv: wgpu::Buffer,
     pub(super) staging: wgpu::Buffer,
+    /// The external accelerations (one per particle with forces; one element without).
+    pub(super) accel: wgpu::Buffer,
     pub(super) bind_group: wgpu::BindGroup,
     /// Colour ranges (start, count), in sweep order.
     pub(super) colours: Vec<(u32, u32)>,
@@ -136,12 +138,13 @@ pub(super) fn incidence(
 
 impl GpuSolver {
     /// Gather: uploads state and topology, with coefficients `lin` (per packed spring) for step
-    /// `h`, and builds the pipelines if the scene needs another specialisation.
+    /// `h`, and builds the pipelines if the scene needs another specialisation (`forces`: the
+    /// schedule lists a force stage, whose accelerations [`Self::set_accel`] sets each frame).
     pub fn upload(
         &mut self,
         packed: &Packed,
         lin: &[Linear],
-        gravity: DVec3,
+        (gravity, forces): (DVec3, bool),
         h: f64,
         integrator: Integrator,
     ) -> Result<(), GpuError> {
@@ -152,7 +155,10 @@ impl GpuSolver {
                 what: format!("{integrator} does not step cloth grids kept whole"),
             });
         }
-        let mut spec = Specialisation::of(packed, lin, h, integrator);
+        let mut spec = Specialisation {
+            forces,
+            ..Specialisation::of(packed, lin, h, integrator)
+        };
         if !self.specialise {
             spec = spec.general();
         }
@@ -297,6 +303,13 @@ impl GpuSolver {
             let entries = init("entries", bytemuck::cast_slice(&entries), U::STORAGE);
             let colour = init("colours", &colour_bytes, U::UNIFORM);
             let state_bytes = (n * (std::mem::size_of::<Position>() + 16)).max(32) as u64;
+            // Only with forces: per particle (n at most u32 range, so the size fits).
+            let accel = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("accel"),
+                size: if forces { 16 * n.max(1) as u64 } else { 16 },
+                usage: U::STORAGE | U::COPY_DST,
+                mapped_at_creation: false,
+            });
             let staging = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("staging"),
                 size: state_bytes,
@@ -323,6 +336,7 @@ impl GpuSolver {
                             size: wgpu::BufferSize::new(range_size as u64),
                         }),
                     },
+                    entry(9, &accel),
                 ],
             });
             Buffers {
@@ -332,6 +346,7 @@ impl GpuSolver {
                 coefs,
                 sdv,
                 staging,
+                accel,
                 bind_group,
                 colours,
                 grids,

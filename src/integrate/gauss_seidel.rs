@@ -3,8 +3,6 @@
 
 use std::marker::PhantomData;
 
-use glam::DVec3;
-
 use super::harmonic::Linear;
 use super::par;
 use crate::buffers::{Packed, PackedSpring};
@@ -95,12 +93,12 @@ pub(super) fn sweep(
     }
 }
 
-/// `v += g h` on free particles.
-pub(super) fn add_gravity(packed: &mut Packed, g: DVec3, h: f64) {
+/// `v += g h` on free particles (`g` the external acceleration).
+pub(super) fn add_gravity(packed: &mut Packed, g: super::External<'_>, h: f64) {
     let Packed { v, inv_mass, .. } = packed;
     par::each(v, |i, vi| {
         if inv_mass[i] != 0.0 {
-            *vi += g * h;
+            *vi += g.at(i) * h;
         }
     });
 }

@@ -83,7 +83,7 @@ impl Implicit {
         self.partial.resize(n.div_ceil(DOT_CHUNK), 0.0);
     }
 
-    pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
+    pub fn step(&mut self, packed: &mut Packed, g: super::External<'_>, h: f64) {
         let degenerate = self.linearise(packed, g, h, h, false);
         self.solve(packed);
         self.finish(packed, h, 1.0, degenerate);
@@ -97,7 +97,7 @@ impl Implicit {
     pub(super) fn linearise(
         &mut self,
         packed: &Packed,
-        g: DVec3,
+        g: super::External<'_>,
         h: f64,
         hs: f64,
         l1: bool,
@@ -152,7 +152,7 @@ impl Implicit {
                     packed.incidence.offsets[i] as usize,
                     packed.incidence.offsets[i + 1] as usize,
                 );
-                let mut f = packed.mass(i) * g;
+                let mut f = packed.mass(i) * g.at(i);
                 let mut diag = DVec3::splat(packed.mass(i));
                 for e in lo..hi {
                     let k = packed.incidence.spring[e] as usize;

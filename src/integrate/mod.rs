@@ -54,6 +54,27 @@ pub(crate) enum Update {
     PaperAlgorithm1,
 }
 
+/// The external acceleration the integrators add where they read gravity: gravity alone, a
+/// constant, or per particle (gravity included) when the schedule lists a force stage.
+#[derive(Clone, Copy, Debug)]
+pub enum External<'a> {
+    /// The same acceleration for every particle.
+    Uniform(DVec3),
+    /// One acceleration per particle, in packed order.
+    PerParticle(&'a [DVec3]),
+}
+
+impl External<'_> {
+    /// Particle `i`'s external acceleration.
+    #[inline(always)]
+    pub fn at(self, i: usize) -> DVec3 {
+        match self {
+            External::Uniform(g) => g,
+            External::PerParticle(a) => a[i],
+        }
+    }
+}
+
 /// Per-scene solver state: step coefficients for the current `h` and scratch, sized at gather.
 #[derive(Clone, Debug)]
 pub struct Solver {
@@ -248,8 +269,19 @@ impl Solver {
 
     /// Advances the packed state by one substep `h` (allocates nothing).
     pub fn substep(&mut self, packed: &mut Packed, h: f64) -> Result<(), SimError> {
+        self.substep_with(packed, h, None)
+    }
+
+    /// As [`Self::substep`], with `accel` (packed order, gravity included) for the external
+    /// acceleration instead of gravity alone.
+    pub fn substep_with(
+        &mut self,
+        packed: &mut Packed,
+        h: f64,
+        accel: Option<&[DVec3]>,
+    ) -> Result<(), SimError> {
         self.prepare(packed, h)?;
-        let g = self.gravity;
+        let g = accel.map_or(External::Uniform(self.gravity), External::PerParticle);
         match self.integrator {
             Integrator::Harmonic | Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
                 // One pass shape; the coefficients (set in `prepare`) and the update differ.
@@ -286,7 +318,7 @@ impl Solver {
                 );
                 particle_pass(packed, &self.sdv, &[], g, h, Update::PaperAlgorithm1);
             }
-            Integrator::Rk4 => self.rk4(packed, h),
+            Integrator::Rk4 => self.rk4(packed, g, h),
             Integrator::HarmonicGs => {
                 gauss_seidel::add_gravity(packed, g, h);
                 gauss_seidel::sweep(packed, &self.swept, None, false);
@@ -300,7 +332,7 @@ impl Solver {
                 gauss_seidel::drift(packed, h);
             }
             Integrator::HarmonicForced => {
-                self.freeze_forcing(packed);
+                self.freeze_forcing(packed, g);
                 let law = Law::Forced(&self.lin, &self.force);
                 spring_pass(
                     &packed.springs,
@@ -314,7 +346,7 @@ impl Solver {
                 particle_pass(packed, &self.sdv, &[], g, h, Update::VelocityFirst);
             }
             Integrator::HarmonicForcedGs => {
-                self.freeze_forcing(packed);
+                self.freeze_forcing(packed, g);
                 // Gravity is in the forcing; it reaches the velocities after the sweep.
                 gauss_seidel::sweep(packed, &self.swept, Some(&self.force), false);
                 gauss_seidel::add_gravity(packed, g, h);
@@ -329,8 +361,7 @@ impl Solver {
 
     /// For each spring, the relative acceleration along its axis from every force but its
     /// own (other springs, gravity), at the start of the step.
-    fn freeze_forcing(&mut self, packed: &Packed) {
-        let g = self.gravity;
+    fn freeze_forcing(&mut self, packed: &Packed, g: External<'_>) {
         spring_pass(
             &packed.springs,
             &packed.x,
@@ -356,8 +387,7 @@ impl Solver {
         });
     }
 
-    fn rk4(&mut self, packed: &mut Packed, h: f64) {
-        let g = self.gravity;
+    fn rk4(&mut self, packed: &mut Packed, g: External<'_>, h: f64) {
         let [x0, v0, xt, vt, ax, av, bx, bv, sx, sv] = &mut self.rk[..] else {
             unreachable!("prepare sizes rk to 10 vectors")
         };
@@ -545,7 +575,7 @@ fn particle_pass(
     packed: &mut Packed,
     sdv: &[DVec3],
     sdx: &[DVec3],
-    g: DVec3,
+    g: External<'_>,
     h: f64,
     update: Update,
 ) {
@@ -568,6 +598,7 @@ fn particle_pass(
                 return;
             }
             let dv = inc.sum(sdv, i);
+            let g = g.at(i);
             match update {
                 Update::VelocityFirst | Update::PositionFirst => {
                     (*xi, *vi) = euler_move(update, *xi, *vi, dv, g, h);
@@ -586,12 +617,12 @@ fn particle_pass(
 }
 
 /// Accelerations from per-spring relative accelerations (RK4's derivative).
-fn acceleration(packed: &Packed, sdv: &[DVec3], g: DVec3, out: &mut [DVec3]) {
+fn acceleration(packed: &Packed, sdv: &[DVec3], g: External<'_>, out: &mut [DVec3]) {
     par::each(out, |i, a| {
         *a = if packed.inv_mass[i] == 0.0 {
             DVec3::ZERO
         } else {
-            packed.incidence.sum(sdv, i) + g
+            packed.incidence.sum(sdv, i) + g.at(i)
         };
     });
 }

@@ -307,7 +307,7 @@ impl Multigrid {
         }
     }
 
-    pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
+    pub fn step(&mut self, packed: &mut Packed, g: super::External<'_>, h: f64) {
         let hs = THETA * h;
         // l1 sweeps on the fine level; the same diagonal preconditions CG on small scenes.
         let degenerate = self.lin.linearise(packed, g, h, hs, true);

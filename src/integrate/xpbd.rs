@@ -23,7 +23,7 @@ impl Xpbd {
         self.prev.resize(n, DVec3::ZERO);
     }
 
-    pub fn step(&mut self, packed: &mut Packed, g: DVec3, h: f64) {
+    pub fn step(&mut self, packed: &mut Packed, g: super::External<'_>, h: f64) {
         self.prev.copy_from_slice(&packed.x);
         // Predict: x̃ = x + h (v + h g).
         gauss_seidel::add_gravity(packed, g, h);

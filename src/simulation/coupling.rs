@@ -12,58 +12,6 @@ pub(super) enum Coupling<'a> {
     },
 }
 
-/// A frame with springs and contacts on the device. Without dynamic bodies the bodies move
-/// first for every substep (nothing they do depends on the cloth), all substeps go in one
-/// submit and the partials come back once, for the statistics. With dynamic bodies each
-/// substep is its own submit and its partials come back to push the bodies before the next.
-#[cfg(feature = "gpu")]
-pub(super) fn device_frame(
-    gpu: &mut crate::gpu::GpuSolver,
-    p: &mut Props,
-    scratch: &mut Vec<crate::gpu::contacts::Collider>,
-    substeps: u32,
-    h: f64,
-    host_time: &mut Duration,
-) -> Result<(), SimError> {
-    let Some(dc) = gpu.contacts() else {
-        return Ok(());
-    };
-    let (groups, nc) = dc.shape();
-    let per_slot = groups * nc;
-    if !p.dynamic {
-        let t = Instant::now();
-        for s in 0..substeps {
-            p.step_bodies(h);
-            p.device_colliders(scratch);
-            if let Some(dc) = gpu.contacts() {
-                dc.set_colliders(s, scratch);
-            }
-        }
-        *host_time += t.elapsed();
-        gpu.run(substeps)?;
-        let partials = gpu.read_partials(0, substeps)?;
-        for slot in partials.chunks(per_slot) {
-            p.apply_device(slot, groups, nc);
-        }
-        return Ok(());
-    }
-    for s in 0..substeps {
-        let t = Instant::now();
-        p.step_bodies(h);
-        p.device_colliders(scratch);
-        if let Some(dc) = gpu.contacts() {
-            dc.set_colliders(s, scratch);
-        }
-        *host_time += t.elapsed();
-        gpu.run_slots(s, 1)?;
-        let partials = gpu.read_partials(s, 1)?;
-        let t = Instant::now();
-        p.apply_device(partials, groups, nc);
-        *host_time += t.elapsed();
-    }
-    Ok(())
-}
-
 impl Coupling<'_> {
     pub(super) fn begin_frame(&mut self, substeps: u32) {
         match self {

@@ -1,7 +1,9 @@
 //! The `Simulation` facade: a World, its packed buffers and the schedule that steps them.
 //!
-//! The step order is in one function, `Simulation::step_coupled` (`step.rs`); the game-loop
-//! frame, run-time edits, the quarantine and the coupling with rigid bodies each have a file.
+//! A frame's order is data: the [`Schedule`] of the stages the scene needs, built in
+//! `build_schedule` and run by the one loop of `run.rs`; the frame's start and end are in
+//! `step.rs`. The game-loop frame, run-time edits, the quarantine and the coupling with rigid
+//! bodies each have a file.
 
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -20,19 +22,19 @@ use crate::integrate::Solver;
 use crate::metrics;
 use crate::scene::props::ContactMaterial;
 use crate::scene::{Limits, Scene};
-use crate::schedule::StepStats;
+use crate::schedule::{Needs, Schedule, StepStats};
 use crate::step_control::{self, StepChoice};
 
 mod accuracy;
 mod coupling;
 mod edit;
+mod forces;
 mod frame;
 mod motion;
 mod quarantine;
+mod run;
 mod step;
 
-#[cfg(feature = "gpu")]
-use coupling::device_frame;
 use coupling::Coupling;
 use frame::{grid_of, Frame};
 pub use frame::{Advance, RenderView};
@@ -90,6 +92,12 @@ pub struct Simulation {
     steps: u64,
     time: f64,
     stats: StepStats,
+    /// The stages a frame runs, in order.
+    schedule: Schedule,
+    /// The game's per-particle forces ([`Simulation::set_forces`]).
+    forces: Option<forces::Forces>,
+    /// Whether the frame times its stages ([`Simulation::set_timers`]).
+    timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
     #[cfg(feature = "gpu")]
     gpu: Option<crate::gpu::GpuSolver>,
@@ -229,6 +237,9 @@ impl Simulation {
             steps: 0,
             time: 0.0,
             stats: StepStats::default(),
+            schedule: Schedule::default(),
+            forces: None,
+            timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
             props,
@@ -337,6 +348,7 @@ impl Simulation {
         }
         #[cfg(feature = "gpu")]
         self.device_contacts()?;
+        self.build_schedule(self.user_stage.is_some());
         Ok(())
     }
 
@@ -440,9 +452,46 @@ impl Simulation {
         &self.packed
     }
 
-    /// What each stage of the last frame cost.
+    /// What the last frame did, and what each stage cost.
     pub fn stats(&self) -> &StepStats {
         &self.stats
+    }
+
+    /// Whether a frame times its stages (on by default). Off, as rapier's `Counters` can be,
+    /// the substeps read no clock: [`StepStats::stages`] and [`StepStats::audit_time`] stay
+    /// zero (the gather and the scatter are still timed, once a frame).
+    pub fn set_timers(&mut self, on: bool) {
+        self.timers = on;
+    }
+
+    /// The stages a frame runs, in order (as of the last step, or of the last change of the
+    /// scene or settings before it): `schedule: {}` prints
+    /// `gravity → integrate (symplectic-euler, 30 substeps) → quarantine`.
+    pub fn schedule(&self) -> &Schedule {
+        &self.schedule
+    }
+
+    /// Builds the schedule, in place, from what the scene needs now (`coupled`: this frame
+    /// steps against the caller's rapier sets).
+    fn build_schedule(&mut self, coupled: bool) {
+        #[cfg(feature = "gpu")]
+        let device_contacts = self.gpu.as_ref().is_some_and(|g| g.has_contacts());
+        #[cfg(not(feature = "gpu"))]
+        let device_contacts = false;
+        let contacts_on = match (&self.props, coupled) {
+            (Some(_), _) if device_contacts => Some(Backend::Gpu),
+            (Some(_), _) | (None, true) => Some(Backend::Cpu),
+            (None, false) => None,
+        };
+        self.schedule.rebuild(Needs {
+            gravity: self.config.gravity != DVec3::ZERO,
+            forces: self.forces.is_some(),
+            integrator: self.config.integrator,
+            substeps: self.config.substeps,
+            springs_on: self.backend(),
+            contacts_on,
+            device_contacts_per_substep: self.props.as_ref().is_some_and(|p| p.dynamic),
+        });
     }
 
     /// Frames stepped so far.

@@ -104,8 +104,11 @@ impl Simulation {
             Solver::new(config.integrator, config.exact_displacement, config.gravity)
         });
         let h = pr.h;
-        let run =
-            |solver: &mut Solver, p: &mut Packed| (0..steps).try_for_each(|_| solver.substep(p, h));
+        // The game's forces as they are now (they may have changed since the check frame).
+        let accel = self.forces.as_ref().map(|f| &f.accel[..]);
+        let run = |solver: &mut Solver, p: &mut Packed| {
+            (0..steps).try_for_each(|_| solver.substep_with(p, h, accel))
+        };
         let result = if self.parallel {
             rayon::scope(|_| run(solver, p))
         } else {

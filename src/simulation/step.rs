@@ -1,6 +1,7 @@
-//! Stepping: the stage order of a frame, gather and the frame's end.
+//! Stepping: a frame's start (gather, the schedule, the books), its stages' run and its end.
 
 use super::*;
+use crate::schedule::{StageKind, StageTimes};
 
 impl Simulation {
     /// Advances one frame of `dt`. Stages, in order:
@@ -44,15 +45,17 @@ impl Simulation {
         self.step_coupled(Some((bodies, colliders)))
     }
 
-    /// The step order, the one place it is written (both [`Self::step`] and
-    /// [`Self::step_with`] run it):
-    /// 1. gather: World → packed buffers, only when the World changed (a pin set or freed
-    ///    refreshes the mass split only, a pinned particle moved writes the state only);
-    /// 2. per substep: the integrate kernel (CPU, or the device's, all substeps in one submit
-    ///    when nothing on the CPU needs the state between them), then, with bodies, the contact
-    ///    stage (rapier steps the bodies, attachments follow them, particles are pushed out of
-    ///    colliders with friction, bodies get the opposite impulses), then the quarantine check;
-    /// 3. scatter (`finish_frame`): buffers → World, this frame's quarantined particles pinned.
+    /// A frame, for both [`Self::step`] and [`Self::step_with`]:
+    /// 1. frame start: gather (World → packed buffers, only when the World changed: a pin set
+    ///    or freed refreshes the mass split only, a pinned particle moved writes the state
+    ///    only), the schedule rebuilt in place, the energy books opened, the stages' frame
+    ///    start;
+    /// 2. the schedule's stages ([`Self::schedule`]), substep by substep, by the one loop of
+    ///    `run.rs`; on the CPU the accuracy controller may reject the frame and run it again
+    ///    from its start with more substeps;
+    /// 3. frame end (`finish_frame`): the quarantine's pins, the energy books closed, the
+    ///    scatter (buffers → World), the strain and energy checks; then the motion check's
+    ///    share and the next frame's substeps.
     pub(super) fn step_coupled(
         &mut self,
         user: Option<(&mut RigidBodySet, &ColliderSet)>,
@@ -62,9 +65,16 @@ impl Simulation {
         let edited = self.dirty || !self.pins.is_empty() || self.state_edited;
         self.contained.clear();
         self.sync()?;
+        self.build_schedule(user.is_some());
         let t1 = Instant::now();
         self.open_books(edited);
-        let mut audit_time = t1.elapsed();
+        let open_time = if self.timers {
+            t1.elapsed()
+        } else {
+            Duration::ZERO
+        };
+        // The accuracy controller's first hook: this frame is probed (run again on a copy,
+        // over the next frames).
         let probing = self.checks_motion();
         let h = self.config.h();
         let substeps = self.config.substeps;
@@ -77,162 +87,141 @@ impl Simulation {
             (None, Some(p), _) => Some(Coupling::Own(p)),
             _ => None,
         };
-        let mut contacts = Duration::ZERO;
         if let Some(c) = coupling.as_mut() {
             c.begin_frame(substeps);
         }
+        // The force stage, once a frame: gravity and `F/m` summed into one acceleration.
+        let t = (self.timers && self.forces.is_some()).then(Instant::now);
+        let forces = self.forces.as_mut().map(|f| {
+            f.prepare(&self.packed, self.config.gravity);
+            &*f
+        });
         #[cfg(feature = "gpu")]
-        if let Some(gpu) = &mut self.gpu {
-            match coupling.as_mut() {
-                // On the device the quarantine checks the state where it comes back: once per
-                // frame when the substeps go in one submit.
-                None => {
-                    // Every substep in one submit; the state comes back once, for the scatter.
-                    gpu.run(substeps)?;
-                    gpu.read_back(&mut self.packed)?;
-                    contain(&mut self.packed, &self.world, &mut self.contained);
-                }
-                Some(Coupling::Own(p)) if gpu.contacts().is_some() => {
-                    device_frame(gpu, p, &mut self.device_scratch, substeps, h, &mut contacts)?;
-                    gpu.read_back(&mut self.packed)?;
-                    contain(&mut self.packed, &self.world, &mut self.contained);
-                }
-                Some(c) => {
-                    // Contacts run on the CPU: the state goes back and forth every substep.
-                    for k in 1..=substeps {
-                        let t = Instant::now();
-                        c.begin_substep(&self.packed);
-                        contacts += t.elapsed();
-                        gpu.run(1)?;
-                        gpu.read_back(&mut self.packed)?;
-                        let t = Instant::now();
-                        c.substep(&mut self.packed, h, k);
-                        contacts += t.elapsed();
-                        if contain(&mut self.packed, &self.world, &mut self.contained) {
-                            c.moved();
-                        }
-                        gpu.write_state(&self.packed);
-                    }
-                }
-            }
-            let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
-            return self.finish_frame(
-                t0,
-                t1,
-                gathered,
-                (contacts, audit_time),
-                None,
-                (None, projections),
-            );
+        if let (Some(gpu), Some(f)) = (self.gpu.as_mut(), forces) {
+            gpu.set_accel(&f.accel)?;
         }
-        // A frame the accuracy controller may take again: automatic substeps, no step budget
-        // (the wall clock has the last word there), nothing outside the cloth (bodies) that a
-        // retry would have to wind back.
-        let retry =
-            self.config.auto_substeps && !self.config.step_budget.is_finite() && coupling.is_none();
+        let n = self.packed.particle_count();
+        self.auditor.set_forced(forces.is_some(), n);
+        let mut times = crate::schedule::StageTimes::default();
+        if let Some(t) = t {
+            times[StageKind::Forces] = t.elapsed();
+        }
+        #[cfg(feature = "gpu")]
+        let device = self.gpu.as_mut().map(|gpu| run::Device {
+            gpu,
+            scratch: &mut self.device_scratch,
+            host_newer: false,
+            device_newer: false,
+        });
+        #[cfg(feature = "gpu")]
+        let on_device = device.is_some();
+        #[cfg(not(feature = "gpu"))]
+        let on_device = false;
+        // The accuracy controller's second hook: a frame it may reject and run again from its
+        // start (automatic substeps, no step budget: the wall clock has the last word there;
+        // the CPU; nothing outside the cloth, such as bodies, that a retry would wind back).
+        let retry = self.config.auto_substeps
+            && !self.config.step_budget.is_finite()
+            && coupling.is_none()
+            && !on_device;
         if retry || probing {
             self.controller.keep_start(&self.packed);
         }
+        let mut run = run::Run {
+            schedule: &self.schedule,
+            forces,
+            packed: &mut self.packed,
+            solver: &mut self.solver,
+            auditor: &mut self.auditor,
+            world: &self.world,
+            found: &mut self.contained,
+            coupling,
+            #[cfg(feature = "gpu")]
+            device,
+            law: crate::audit::DamperLaw::of(self.config.integrator),
+            times,
+            audit_time: open_time,
+            lap: t1,
+            timed: self.timers,
+        };
         let tol = self.config.tolerance * self.energy_scale;
-        let mut substeps = substeps;
-        let substeps_out = &mut substeps;
         let controller = &mut self.controller;
-        let (solver, packed) = (&mut self.solver, &mut self.packed);
-        let (world, found) = (&self.world, &mut self.contained);
-        let auditor = &mut self.auditor;
-        let law = crate::audit::DamperLaw::of(self.config.integrator);
-        let coupling_ref = &mut coupling;
-        let audit_out = &mut audit_time;
-        let contacts_time = &mut contacts;
-        // The strain check reads the frame's end state inside the same rayon job.
-        let check = self.config.strain_limit.is_finite();
+        let (gravity, dt) = (self.config.gravity, self.config.dt);
         let limit = self.config.strain_limit;
-        let mut beyond = None;
-        let beyond_out = &mut beyond;
-        let gravity = self.config.gravity;
-        let dt = self.config.dt;
-        let mut end = None;
-        let end_out = &mut end;
-        let integrate = move || {
-            let coupling = coupling_ref;
-            let damping = auditor.frame.damping;
+        let mut substeps = substeps;
+        let run_ref = &mut run;
+        let substeps_out = &mut substeps;
+        let frame = move || {
+            let run = run_ref;
+            let (damping, work) = (run.auditor.frame.damping, run.auditor.frame.forces);
             let mut h = h;
-            loop {
-                (1..=*substeps_out).try_for_each(|k| {
-                    if let Some(c) = coupling.as_mut() {
-                        let t = Instant::now();
-                        c.begin_substep(packed);
-                        *contacts_time += t.elapsed();
-                    }
-                    let t = Instant::now();
-                    auditor.begin_substep(packed);
-                    let t = t.elapsed();
-                    solver.substep(packed, h)?;
-                    let u = Instant::now();
-                    auditor.damping(packed, law, h, solver.grid_damper_loss());
-                    *audit_out += t + u.elapsed();
-                    if let Some(c) = coupling.as_mut() {
-                        let t = Instant::now();
-                        c.substep(packed, h, k);
-                        *contacts_time += t.elapsed();
-                    }
-                    if contain(packed, world, found) {
-                        if let Some(c) = coupling.as_mut() {
-                            c.moved();
-                        }
-                    }
-                    Ok::<(), SimError>(())
-                })?;
-                let t = Instant::now();
-                let e = auditor.energy(packed, gravity);
-                *end_out = Some(e);
-                *audit_out += t.elapsed();
-                if !retry || !found.is_empty() {
-                    break;
+            let end = loop {
+                run.substeps(*substeps_out, h)?;
+                let t = run.timed.then(Instant::now);
+                let e = run.auditor.energy(run.packed, gravity);
+                if let Some(t) = t {
+                    run.audit_time += t.elapsed();
                 }
-                let f = &auditor.frame;
-                let before = auditor.run.residual;
-                let after = before + (e - f.start - f.edits + f.damping);
+                if !retry || !run.found.is_empty() {
+                    break e;
+                }
+                let f = &run.auditor.frame;
+                let before = run.auditor.run.residual;
+                let after = before + (e - f.start - f.edits - f.forces + f.damping);
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
-                    break;
+                    break e;
                 };
-                controller.restore_start(packed);
-                auditor.frame.damping = damping;
+                controller.restore_start(run.packed);
+                run.auditor.frame.damping = damping;
+                run.auditor.frame.forces = work;
                 *substeps_out = more;
                 h = dt / more as f64;
-                solver.prepare(packed, h)?;
-            }
-            if check {
-                *beyond_out = Some(crate::metrics::beyond(packed, limit));
-            }
-            Ok::<(), SimError>(())
+                run.solver.prepare(run.packed, h)?;
+            };
+            // The strain check reads the frame's end state inside the same job.
+            let beyond = limit
+                .is_finite()
+                .then(|| crate::metrics::beyond(run.packed, limit));
+            Ok::<_, SimError>((end, beyond))
         };
-        if self.parallel {
+        let (end, beyond) = if self.parallel {
             // One rayon job per frame: the passes inside run from a worker's own deque, so
             // the only allocation is the injector's queue block, recycled every 63 frames.
-            rayon::scope(|_| integrate())?;
+            rayon::scope(|_| frame())?
         } else {
-            integrate()?;
-        }
+            frame()?
+        };
+        let (times, audit_time) = (run.times, run.audit_time);
+        let projections = run
+            .coupling
+            .map(|mut c| c.stage().energy)
+            .unwrap_or_default();
         self.config.substeps = substeps;
-        let projections = coupling.map(|mut c| c.stage().energy).unwrap_or_default();
         self.finish_frame(
             t0,
             t1,
             gathered,
-            (contacts, audit_time),
+            (times, audit_time),
             beyond,
             (end, projections),
         )?;
-        // The motion check: begun after its frame, its second run advanced a share after
-        // each frame that follows.
-        let t = Instant::now();
-        let probed = self.advance_probe()?;
-        if probing {
-            self.begin_probe(substeps);
+        // The accuracy controller runs on the CPU: on the device the substeps stay at the
+        // stability floor's (the device's contact slots are sized for them).
+        if !on_device {
+            // The motion check: begun after its frame, its second run advanced a share after
+            // each frame that follows.
+            let t = self.timers.then(Instant::now);
+            let probed = self.advance_probe()?;
+            if probing {
+                self.begin_probe(substeps);
+            }
+            if let Some(t) = t {
+                self.stats.stages[StageKind::Integrate] += t.elapsed();
+            }
+            // The accuracy controller's third hook: the next frame's substeps.
+            self.adapt(probed);
+            self.schedule.set_substeps(self.config.substeps);
         }
-        self.stats.integrate += t.elapsed();
-        self.adapt(probed);
         Ok(&self.stats)
     }
 
@@ -247,25 +236,22 @@ impl Simulation {
     }
 
     /// The end of a frame: the quarantine (the state is finite: every substep ended with
-    /// [`contain`]), the energy books, then the scatter and the checks (`beyond`: the strain
-    /// check's answer and `end` the energy, when the integrate stage already took them).
+    /// [`contain`]), the energy books closed at `end` (taken in the frame's job), then the
+    /// scatter and the checks (`beyond`: the strain check's answer, when the job took it).
     pub(super) fn finish_frame(
         &mut self,
         t0: Instant,
         t1: Instant,
         gathered: bool,
-        (contacts, audit_time): (Duration, Duration),
+        (times, audit_time): (StageTimes, Duration),
         beyond: Option<bool>,
-        (end, projections): (Option<f64>, crate::audit::ProjectionLines),
+        (end, projections): (f64, crate::audit::ProjectionLines),
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.quarantine();
         self.steps += 1;
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
-        let t = Instant::now();
-        let end = end.unwrap_or_else(|| self.auditor.energy(&self.packed, self.config.gravity));
-        let late = t.elapsed();
         self.auditor.end_frame(end, projections, quarantined > 0);
         self.packed.scatter(&mut self.world);
         let failure = self.check_strain(beyond).or_else(|| self.check_energy());
@@ -273,10 +259,9 @@ impl Simulation {
         let t3 = Instant::now();
         self.stats = StepStats {
             gather: t1 - t0,
-            integrate: (t2 - t1).saturating_sub(contacts + audit_time),
-            contacts,
-            audit_time: audit_time + late,
-            scatter: (t3 - t2).saturating_sub(late),
+            stages: times,
+            audit_time,
+            scatter: t3 - t2,
             gathered,
             substeps: self.config.substeps,
             quarantined,
@@ -410,6 +395,7 @@ impl Simulation {
         // In place: the old buffers go before the new ones are made (never two copies), and
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
+        self.drop_stale_forces();
         let parts = crate::metrics::energy_parts(&self.packed, self.config.gravity);
         self.energy_scale = parts.scale();
         self.energy_in_motion = parts.internal();
@@ -458,10 +444,12 @@ impl Simulation {
         if let Some(gpu) = &mut self.gpu {
             let c = &self.config;
             let lin = self.solver.coefficients();
-            gpu.upload(&self.packed, lin, c.gravity, c.h(), c.integrator)?;
+            let forces = self.forces.is_some();
+            gpu.upload(&self.packed, lin, (c.gravity, forces), c.h(), c.integrator)?;
         }
         #[cfg(feature = "gpu")]
         self.device_contacts()?;
+        self.build_schedule(self.user_stage.is_some());
         self.dirty = false;
         Ok(())
     }

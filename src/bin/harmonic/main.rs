@@ -13,7 +13,7 @@ mod summary;
 mod trajectory;
 use harmonic::internals::Readable;
 use harmonic::scene::Limits;
-use harmonic::{Backend, Scene, SimError, Simulation};
+use harmonic::{Backend, Scene, SimError, Simulation, StageKind};
 use progress::Progress;
 
 /// Standard output closed by its reader (`harmonic run … | head -1`): the run stops quietly,
@@ -380,6 +380,7 @@ fn run(args: RunArgs) -> Result<(), String> {
         Some(adapter) => say!("backend: gpu, adapter {adapter}"),
         None => say!("backend: cpu ({} thread(s))", rayon::current_num_threads()),
     }
+    say!("schedule: {}", sim.schedule());
     match ratio {
         Some((r, k)) => say!(
             "h/h_c of the stiffest spring: {} (spring {k}, h_c = π/ω0)",
@@ -418,7 +419,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     }
     let (mut max_strain, mut max_compression) = (start.max_strain, start.max_compression);
     let (mut contacts, mut max_depth, mut swept) = (0usize, 0.0f64, 0usize);
-    let (mut t_integrate, mut t_contacts, mut t_audit) = (0.0, 0.0, 0.0);
+    let mut times = summary::Times::default();
     let mut substeps_run = 0u64;
     let mut bar = Progress::new(steps);
     let t0 = Instant::now();
@@ -436,9 +437,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             Ok(_) => {}
         }
         bar.set(step, sim.time());
-        t_integrate += sim.stats().integrate.as_secs_f64();
-        t_contacts += sim.stats().contacts.as_secs_f64();
-        t_audit += sim.stats().audit_time.as_secs_f64();
+        times.add(sim.stats());
         substeps_run += sim.stats().substeps as u64;
         if let Some(p) = sim.props() {
             contacts += p.stats().contacts;
@@ -471,13 +470,10 @@ fn run(args: RunArgs) -> Result<(), String> {
         done as f64 / wall,
         (m as f64 * substeps as f64) / wall / 1e6
     );
+    say!("{}", times.shares());
     if sim.props().is_some() {
         say!(
-            "contacts: {contacts} particle-collider contacts ({swept} by the swept test), deepest {max_depth:.3e} m inside; \
-             stage time: integrate {:.3} s, contacts {:.3} s ({:.0} % of integrate)",
-            t_integrate,
-            t_contacts,
-            100.0 * t_contacts / t_integrate.max(1e-12)
+            "contacts: {contacts} particle-collider contacts ({swept} by the swept test), deepest {max_depth:.3e} m inside"
         );
     }
     say!(
@@ -486,7 +482,10 @@ fn run(args: RunArgs) -> Result<(), String> {
         Readable::new(100.0 * max_compression, 4)
     );
     say!("{}", summary::energy(&start, &end));
-    say!("{}", summary::audit(&end.audit, t_audit, t_integrate));
+    say!(
+        "{}",
+        summary::audit(&end.audit, times.audit, times.stage(StageKind::Integrate))
+    );
     if let (Some(c), (changes, motion)) = (sim.step_choice(), sim.accuracy()) {
         say!(
             "{}",

@@ -1,7 +1,50 @@
 //! The run summary's energy lines.
 
 use harmonic::internals::Readable;
-use harmonic::{Diagnostics, EnergyAudit};
+use harmonic::{Diagnostics, EnergyAudit, StageKind, StageTimes, StepStats};
+
+/// A run's wall time by stage and by the work around the stages, summed over its frames.
+#[derive(Default)]
+pub struct Times {
+    stages: StageTimes,
+    gather: f64,
+    /// The energy audit's passes (s).
+    pub audit: f64,
+    scatter: f64,
+}
+
+impl Times {
+    pub fn add(&mut self, s: &StepStats) {
+        self.stages += s.stages;
+        self.gather += s.gather.as_secs_f64();
+        self.audit += s.audit_time.as_secs_f64();
+        self.scatter += s.scatter.as_secs_f64();
+    }
+
+    /// One stage kind's time (s).
+    pub fn stage(&self, kind: StageKind) -> f64 {
+        self.stages[kind].as_secs_f64()
+    }
+
+    /// `frame time: 1.234 s — integrate 80.1 %, contacts 12.0 %, …`: each stage with time, then
+    /// the audit, gather and scatter.
+    pub fn shares(&self) -> String {
+        let total = self.stages.total().as_secs_f64() + self.gather + self.audit + self.scatter;
+        let share = |t: f64| Readable::new(100.0 * t / total.max(1e-12), 3);
+        let mut parts: Vec<String> = (self.stages.iter())
+            .filter(|(_, t)| !t.is_zero())
+            .map(|(k, t)| format!("{} {} %", k.name(), share(t.as_secs_f64())))
+            .collect();
+        for (name, t) in [
+            ("audit", self.audit),
+            ("gather", self.gather),
+            ("scatter", self.scatter),
+        ] {
+            parts.push(format!("{name} {} %", share(t)));
+        }
+        format!("frame time: {total:.3} s by stage: {}", parts.join(", "))
+    }
+}
 
 /// The energy at the start and end, as a share of the scene's energy scale.
 pub fn energy(start: &Diagnostics, end: &Diagnostics) -> String {

@@ -262,6 +262,7 @@ impl Ctx<'_> {
                         let sum = DVec3::new(ring[0][s + c], ring[1][s + c], ring[2][s + c]);
                         let dv = sum + incidence.sum(sdv, self.grid.base as usize + i);
                         let v0 = v[k];
+                        let g = g.at(self.grid.base as usize + i);
                         (x[k], v[k]) = euler_move(update, x[k], v[k], dv, g, h);
                         if audit {
                             // The dampers' impulse on this particle does J·(v₀ + v₁)/2.

@@ -22,7 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::harmonic::{self, Linear};
-use super::{axial, euler_move, par, Update};
+use super::{axial, euler_move, par, External, Update};
 use crate::buffers::{Incidence, Packed, PackedGrid};
 use crate::components::GridLink;
 
@@ -302,7 +302,7 @@ impl GridPass {
         &mut self,
         packed: &mut Packed,
         sdv: &[DVec3],
-        g: DVec3,
+        g: External<'_>,
         h: f64,
         update: Update,
     ) {
@@ -324,7 +324,14 @@ impl GridPass {
         }
     }
 
-    fn run_pass(&mut self, packed: &mut Packed, sdv: &[DVec3], g: DVec3, h: f64, update: Update) {
+    fn run_pass(
+        &mut self,
+        packed: &mut Packed,
+        sdv: &[DVec3],
+        g: External<'_>,
+        h: f64,
+        update: Update,
+    ) {
         let Packed {
             topology,
             x,
@@ -382,7 +389,8 @@ struct Shared<'a> {
     inv_mass: &'a [f64],
     incidence: &'a Incidence,
     sdv: &'a [DVec3],
-    g: DVec3,
+    /// The external acceleration (packed order).
+    g: External<'a>,
     h: f64,
     update: Update,
 }
@@ -442,7 +450,7 @@ mod tests {
                 pass.vector = vector;
                 assert_eq!(pass.grids[0].1.len(), 3);
                 for _ in 0..20 {
-                    pass.run(&mut p, &[], g, h, Update::VelocityFirst);
+                    pass.run(&mut p, &[], External::Uniform(g), h, Update::VelocityFirst);
                 }
                 (p.x, p.v)
             };

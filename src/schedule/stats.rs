@@ -1,17 +1,18 @@
-//! What each stage of a frame cost (the order itself is `Simulation::step_coupled`).
+//! What a frame did and cost, and why a finite frame may still be wrong.
 
+use super::StageTimes;
 use crate::error::Readable;
 use std::time::Duration;
 
-/// Wall time of each stage in the last frame.
+/// What the last frame did, and the wall time of each stage of its schedule and of the work
+/// around them (gather, audit, scatter).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StepStats {
     /// Re-gathering the World into packed buffers (about zero when not `gathered`).
     pub gather: Duration,
-    /// The substeps' integration, less the contact stage and the audit.
-    pub integrate: Duration,
-    /// The contact stage (zero without props).
-    pub contacts: Duration,
+    /// Each stage kind's time (zero for a kind not in the schedule). On the GPU the device's
+    /// work is counted where the host waits for it: in the integrate stage.
+    pub stages: StageTimes,
     /// The energy audit: the dampers' pass after each substep (damped scenes only) and the
     /// energy at the frame's ends.
     pub audit_time: Duration,
@@ -132,8 +133,8 @@ impl std::fmt::Display for Failure {
 }
 
 impl StepStats {
-    /// Sum of the four stages' times.
+    /// The frame's wall time: the stages, the gather, the audit and the scatter.
     pub fn total(&self) -> Duration {
-        self.gather + self.integrate + self.contacts + self.audit_time + self.scatter
+        self.gather + self.stages.total() + self.audit_time + self.scatter
     }
 }

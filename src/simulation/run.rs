@@ -1,0 +1,263 @@
+//! The one loop that runs a frame's schedule ([`Schedule`]) on either back end, and the
+//! stages matched in one place.
+//!
+//! Substeps go in batches: one substep at a time on the CPU; on the device all of a frame's
+//! substeps in one submit unless a stage needs the host between them
+//! ([`Schedule::substeps_per_submit`]). Each batch runs every stage's `begin` (work before the
+//! springs move: the contact stage keeps the start positions, or poses the device's colliders
+//! for the batch's slots), then every stage in order. The state comes back from the device
+//! when a host stage needs it, and at the frame's end.
+
+use super::*;
+use crate::audit::{Auditor, DamperLaw};
+use crate::schedule::{Schedule, Stage, StageKind, StageTimes};
+
+/// What the stages of one frame work on: borrowed from the [`Simulation`], so the frame can
+/// run as one rayon job.
+pub(super) struct Run<'a> {
+    pub(super) schedule: &'a Schedule,
+    /// The game's forces and the frame's external accelerations, when the force stage is
+    /// listed.
+    pub(super) forces: Option<&'a super::forces::Forces>,
+    pub(super) packed: &'a mut Packed,
+    pub(super) solver: &'a mut Solver,
+    pub(super) auditor: &'a mut Auditor,
+    pub(super) world: &'a World,
+    /// Particles the quarantine found this frame.
+    pub(super) found: &'a mut Vec<usize>,
+    pub(super) coupling: Option<Coupling<'a>>,
+    #[cfg(feature = "gpu")]
+    pub(super) device: Option<Device<'a>>,
+    pub(super) law: DamperLaw,
+    pub(super) times: StageTimes,
+    /// The audit's share of the substeps (the dampers' pass).
+    pub(super) audit_time: Duration,
+    /// The last lap of the stage clock.
+    pub(super) lap: Instant,
+    /// Whether the stages are timed ([`Simulation::set_timers`]): off, no clock is read.
+    pub(super) timed: bool,
+}
+
+/// The device's side of a frame.
+#[cfg(feature = "gpu")]
+pub(super) struct Device<'a> {
+    pub(super) gpu: &'a mut crate::gpu::GpuSolver,
+    /// Host scratch for the device contact stage's colliders.
+    pub(super) scratch: &'a mut Vec<crate::gpu::contacts::Collider>,
+    /// A host stage moved particles since the state last went to the device.
+    pub(super) host_newer: bool,
+    /// The device stepped since the state last came back.
+    pub(super) device_newer: bool,
+}
+
+impl Run<'_> {
+    /// The wall time since the last lap goes to `kind`.
+    fn charge(&mut self, kind: StageKind) {
+        if self.timed {
+            let now = Instant::now();
+            self.times[kind] += now - self.lap;
+            self.lap = now;
+        }
+    }
+
+    /// The wall time since the last lap goes to the audit.
+    fn charge_audit(&mut self) {
+        if self.timed {
+            let now = Instant::now();
+            self.audit_time += now - self.lap;
+            self.lap = now;
+        }
+    }
+
+    /// Substeps `1..=substeps` of `h`: the schedule's stages, batch by batch; then, on the
+    /// device, the state back for the frame's end and the quarantine's check of it.
+    pub(super) fn substeps(&mut self, substeps: u32, h: f64) -> Result<(), SimError> {
+        let schedule = self.schedule;
+        let per_submit = schedule.substeps_per_submit(substeps);
+        if self.timed {
+            self.lap = Instant::now();
+        }
+        let mut k = 0;
+        while k < substeps {
+            let n = per_submit.min(substeps - k);
+            for &s in schedule.stages() {
+                self.begin(s, k, n, h);
+            }
+            for &s in schedule.stages() {
+                self.run(s, k, n, h)?;
+            }
+            #[cfg(feature = "gpu")]
+            if let Some(d) = self.device.as_mut().filter(|d| d.host_newer) {
+                d.gpu.write_state(self.packed);
+                d.host_newer = false;
+            }
+            k += n;
+        }
+        #[cfg(feature = "gpu")]
+        if self.device.as_ref().is_some_and(|d| d.device_newer) {
+            self.state_to_host()?;
+            self.quarantine();
+        }
+        Ok(())
+    }
+
+    /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
+    fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
+        if stage.kind != StageKind::Contacts {
+            return;
+        }
+        match (stage.on, self.coupling.as_mut()) {
+            (Backend::Cpu, Some(c)) => c.begin_substep(self.packed),
+            #[cfg(feature = "gpu")]
+            (Backend::Gpu, Some(Coupling::Own(p))) => {
+                let Some(d) = self.device.as_mut() else {
+                    return;
+                };
+                // The bodies move first: nothing they do within the batch depends on the cloth.
+                for slot in k..k + n {
+                    p.step_bodies(h);
+                    p.device_colliders(d.scratch);
+                    if let Some(dc) = d.gpu.contacts() {
+                        dc.set_colliders(slot, d.scratch);
+                    }
+                }
+            }
+            _ => {}
+        }
+        let _ = (k, n, h);
+        self.charge(StageKind::Contacts);
+    }
+
+    /// A stage's work over the batch (substeps `k + 1..=k + n`): the one match of the kinds.
+    fn run(&mut self, stage: Stage, k: u32, n: u32, h: f64) -> Result<(), SimError> {
+        match (stage.kind, stage.on) {
+            // Fused: the integrate kernel reads them as its external acceleration (the force
+            // stage's frame-start work is done before the substeps).
+            (StageKind::Gravity | StageKind::Forces, _) => {}
+            (StageKind::Integrate, Backend::Gpu) => self.integrate_on_device(k, n)?,
+            (StageKind::Integrate, _) => {
+                self.auditor.begin_substep(self.packed);
+                self.charge_audit();
+                let accel = self.forces.map(|f| &f.accel[..]);
+                self.solver.substep_with(self.packed, h, accel)?;
+                self.charge(StageKind::Integrate);
+                let loss = self.solver.grid_damper_loss();
+                self.auditor.damping(self.packed, self.law, h, loss);
+                if let Some(f) = self.forces {
+                    self.auditor.force_work(self.packed, &f.given);
+                }
+                self.charge_audit();
+            }
+            (StageKind::Contacts, Backend::Gpu) => self.device_contacts(k, n)?,
+            (StageKind::Contacts, _) => {
+                self.state_to_host()?;
+                if let Some(c) = self.coupling.as_mut() {
+                    c.substep(self.packed, h, k + 1);
+                }
+                self.host_moved();
+                self.charge(StageKind::Contacts);
+            }
+            // Where the state is on the host; on the device it waits for the frame's end.
+            (StageKind::Quarantine, _) => {
+                if !self.state_on_device() {
+                    self.quarantine();
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The quarantine's check of the host's state ([`contain`]); the stages hear of particles
+    /// it moved.
+    fn quarantine(&mut self) {
+        if contain(self.packed, self.world, self.found) {
+            if let Some(c) = self.coupling.as_mut() {
+                c.moved();
+            }
+            self.host_moved();
+        }
+        self.charge(StageKind::Quarantine);
+    }
+
+    /// Whether the device holds a state newer than the host's.
+    fn state_on_device(&self) -> bool {
+        #[cfg(feature = "gpu")]
+        if let Some(d) = &self.device {
+            return d.device_newer;
+        }
+        false
+    }
+
+    /// A host stage moved particles: the device needs the state before it steps again.
+    fn host_moved(&mut self) {
+        #[cfg(feature = "gpu")]
+        if let Some(d) = &mut self.device {
+            d.host_newer = true;
+        }
+    }
+
+    /// Brings the device's state to the host when it is newer (counted in the integrate
+    /// stage, whose work the host waits for here).
+    fn state_to_host(&mut self) -> Result<(), SimError> {
+        #[cfg(feature = "gpu")]
+        if let Some(d) = self.device.as_mut().filter(|d| d.device_newer) {
+            d.gpu.read_back(self.packed)?;
+            d.device_newer = false;
+            self.charge(StageKind::Integrate);
+            if let Some(f) = self.forces {
+                self.auditor.force_work(self.packed, &f.given);
+                self.charge_audit();
+            }
+        }
+        Ok(())
+    }
+
+    #[cfg(feature = "gpu")]
+    fn integrate_on_device(&mut self, k: u32, n: u32) -> Result<(), SimError> {
+        if let Some(d) = self.device.as_mut() {
+            if self.forces.is_some() && !d.device_newer {
+                // The start of the moves whose work the forces book when the state comes back.
+                self.auditor.begin_substep(self.packed);
+            }
+            d.gpu.run_slots(k, n)?;
+            d.device_newer = true;
+        }
+        self.charge(StageKind::Integrate);
+        Ok(())
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    fn integrate_on_device(&mut self, _: u32, _: u32) -> Result<(), SimError> {
+        Ok(())
+    }
+
+    /// The device's contact stage: its partial impulses for the batch's slots come back and
+    /// push the bodies.
+    #[cfg(feature = "gpu")]
+    fn device_contacts(&mut self, k: u32, n: u32) -> Result<(), SimError> {
+        let (Some(Coupling::Own(p)), Some(d)) = (self.coupling.as_mut(), self.device.as_mut())
+        else {
+            return Ok(());
+        };
+        let Some(dc) = d.gpu.contacts() else {
+            return Ok(());
+        };
+        let (groups, nc) = dc.shape();
+        let partials = d.gpu.read_partials(k, n)?;
+        if self.timed {
+            let now = Instant::now();
+            self.times[StageKind::Integrate] += now - self.lap;
+            self.lap = now;
+        }
+        for slot in partials.chunks(groups * nc) {
+            p.apply_device(slot, groups, nc);
+        }
+        self.charge(StageKind::Contacts);
+        Ok(())
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    fn device_contacts(&mut self, _: u32, _: u32) -> Result<(), SimError> {
+        Ok(())
+    }
+}
