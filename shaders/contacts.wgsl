@@ -6,7 +6,8 @@
 // tests/gpu.rs holds the two against each other. Each workgroup sums what its particles did
 // to each collider's body into one partial; the host adds the partials in order.
 
-override WORKGROUP: u32 = 256u;
+// The prelude (shaders/prelude.wgsl: WORKGROUP, Position, linear) is joined before this file.
+
 // Colliders a pass can take (private per-thread sums).
 const MAX_COLLIDERS: u32 = 8u;
 const BALL: u32 = 0u;
@@ -22,11 +23,6 @@ struct Step {
     slot: u32,
     groups: u32,
     _pad: u32,
-}
-
-struct Position {
-    hi: vec4<f32>,
-    lo: vec4<f32>,
 }
 
 struct Collider {
@@ -226,7 +222,7 @@ fn contact_pass(
     @builtin(workgroup_id) wid: vec3<u32>,
     @builtin(num_workgroups) groups: vec3<u32>,
 ) {
-    let i = gid.x + gid.y * groups.x * WORKGROUP;
+    let i = linear(gid, groups);
     let group = wid.x + wid.y * groups.x;
     let nc = min(step.colliders, MAX_COLLIDERS);
     var acc: array<Partial, MAX_COLLIDERS>;

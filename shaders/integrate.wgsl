@@ -7,8 +7,9 @@
 // State is f32. A position is hi + lo (a compensated pair) so that a drift h·v below half an
 // ulp of x still moves the particle (a 2 m tall cloth at h = 5e-5 s moves 2e-8 m per step).
 
+// The prelude (shaders/prelude.wgsl: WORKGROUP, Position, linear) is joined before this file.
+
 // Specialisation, chosen per scene at gather (src/gpu/pipelines.rs, `Specialisation`).
-override WORKGROUP: u32 = 256u;
 // Some spring responds to its stretch rate (q ≠ 0); false for undamped Euler springs.
 override RATE: bool = true;
 // Some particle is pinned; false drops the pin test.
@@ -29,12 +30,6 @@ struct Params {
     // Exactly 1, unknown to the shader compiler: keeps it from folding the two-sum.
     one: f32,
     _pad1: u32,
-}
-
-// x = hi + lo; w unused.
-struct Position {
-    hi: vec4<f32>,
-    lo: vec4<f32>,
 }
 
 // A spring's ends are `ends[k]`; the rest is here. Past the springs (k ≥ params.springs), the
@@ -92,11 +87,6 @@ fn external_accel(i: u32) -> vec3<f32> {
     return params.gravity;
 }
 @group(0) @binding(8) var<uniform> colour: Range;
-
-// A 2-D grid of workgroups (one dimension stops at 65,535) read as one index.
-fn linear(id: vec3<u32>, groups: vec3<u32>) -> u32 {
-    return id.x + id.y * groups.x * WORKGROUP;
-}
 
 fn free(i: u32) -> bool {
     return !PINS || vel[i].w != 0.0;

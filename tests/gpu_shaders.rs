@@ -1,5 +1,6 @@
-//! The GPU back end's shaders, without an adapter: every WGSL file parses and validates, the
-//! embedded sources are the files, and the Rust mirrors are laid out like the WGSL structs.
+//! The GPU back end's shaders, without an adapter: every shader as assembled (the prelude joined
+//! before each step shader) parses and validates, the embedded sources are the files, and the
+//! Rust mirrors are laid out like the WGSL structs.
 #![cfg(feature = "gpu")]
 
 use std::mem::{offset_of, size_of};
@@ -19,41 +20,59 @@ fn shader_files() -> Vec<PathBuf> {
     files
 }
 
-fn parse(path: &Path) -> naga::Module {
-    let text = std::fs::read_to_string(path).expect("readable shader");
-    naga::front::wgsl::parse_str(&text).unwrap_or_else(|e| {
-        panic!(
-            "{}",
-            e.emit_to_string_with_path(&text, &path.display().to_string())
-        )
-    })
+/// The step's shaders, which the prelude goes before.
+const STEP_SHADERS: [&str; 2] = ["integrate.wgsl", "contacts.wgsl"];
+
+/// A shader file as the engine assembles it: the prelude first for a step shader.
+fn assembled(name: &str) -> String {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).expect("readable shader");
+    if STEP_SHADERS.contains(&name) {
+        read("prelude.wgsl") + &read(name)
+    } else {
+        read(name)
+    }
+}
+
+fn parse(name: &str) -> naga::Module {
+    let text = assembled(name);
+    naga::front::wgsl::parse_str(&text)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(&text, name)))
 }
 
 #[test]
 fn every_shader_parses_and_validates() {
+    let mut checked = 0;
     for path in shader_files() {
-        let module = parse(&path);
+        let name = path.file_name().unwrap().to_str().unwrap();
+        if name == "prelude.wgsl" {
+            continue;
+        }
+        let module = parse(name);
         naga::valid::Validator::new(
             naga::valid::ValidationFlags::all(),
             naga::valid::Capabilities::default(),
         )
         .validate(&module)
-        .unwrap_or_else(|e| panic!("{}: {e:?}", path.display()));
+        .unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        checked += 1;
     }
+    assert_eq!(checked, 3, "integrate, contacts and render");
 }
 
 #[test]
-fn the_embedded_shader_is_the_file() {
-    let file = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/integrate.wgsl"),
-    )
-    .expect("readable");
-    assert_eq!(gpu::SHADER, file);
-    let file = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"),
-    )
-    .expect("readable");
-    assert_eq!(gpu::contacts::SHADER, file);
+fn the_embedded_shaders_are_the_prelude_and_the_files() {
+    assert_eq!(gpu::SHADER, assembled("integrate.wgsl"));
+    assert_eq!(gpu::contacts::SHADER, assembled("contacts.wgsl"));
+    assert!(gpu::SHADER.starts_with(gpu::PRELUDE));
+    // One definition: no step shader declares what the prelude does.
+    for name in STEP_SHADERS {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+        let own = std::fs::read_to_string(dir.join(name)).unwrap();
+        for shared in ["struct Position", "override WORKGROUP", "fn linear("] {
+            assert!(!own.contains(shared), "{name} declares {shared} again");
+        }
+    }
 }
 
 /// Size and member offsets of the WGSL struct `name`, from naga's layout.
@@ -89,7 +108,7 @@ macro_rules! check_layout {
 
 #[test]
 fn pod_mirrors_match_the_wgsl_layouts() {
-    let module = parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/integrate.wgsl"));
+    let module = parse("integrate.wgsl");
     check_layout!(
         &module,
         Params {
@@ -117,8 +136,7 @@ fn pod_mirrors_match_the_wgsl_layouts() {
             _pad2
         }
     );
-    let contact_module =
-        parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/contacts.wgsl"));
+    let contact_module = parse("contacts.wgsl");
     {
         check_layout!(
             &contact_module,

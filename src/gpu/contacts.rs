@@ -9,8 +9,12 @@ use wgpu::util::DeviceExt;
 use super::{GpuContext, WORKGROUP};
 use crate::error::GpuError;
 
-/// The WGSL source of the contact stage.
-pub const SHADER: &str = include_str!("../../shaders/contacts.wgsl");
+/// The WGSL source of the contact stage: the prelude ([`super::PRELUDE`]), then
+/// `shaders/contacts.wgsl`.
+pub const SHADER: &str = concat!(
+    include_str!("../../shaders/prelude.wgsl"),
+    include_str!("../../shaders/contacts.wgsl")
+);
 
 /// Colliders one device pass can take (the shader's `MAX_COLLIDERS`).
 pub const MAX_COLLIDERS: usize = 8;

@@ -42,8 +42,13 @@ use upload::*;
 
 pub mod contacts;
 
-/// The WGSL source of every kernel.
-pub const SHADER: &str = include_str!("../../shaders/integrate.wgsl");
+/// What the step's shaders share (`WORKGROUP`, `Position`, `linear`), joined before each.
+pub const PRELUDE: &str = include_str!("../../shaders/prelude.wgsl");
+/// The WGSL source of the integrate kernels: the prelude, then `shaders/integrate.wgsl`.
+pub const SHADER: &str = concat!(
+    include_str!("../../shaders/prelude.wgsl"),
+    include_str!("../../shaders/integrate.wgsl")
+);
 /// Invocations per workgroup (the shader's `WORKGROUP` override).
 pub const WORKGROUP: u32 = 256;
 /// Workgroups per dispatch dimension (WebGPU's minimum limit).
