@@ -415,6 +415,8 @@ fn each_frame_submits_what_its_schedule_asks() {
                 .unwrap_or_else(|e| panic!("{name}: {e}"))
                 .substeps;
             let made = sim.gpu_solver().expect("on the GPU").submits() - before;
+            // The host waited for the device's kernels: the device's share of the frame.
+            assert!(!sim.stats().device.is_zero(), "{name}: {:?}", sim.stats());
             let want = if per_substep { u64::from(substeps) } else { 1 };
             assert_eq!(made, want, "{name} frame {frame}: {}", sim.schedule());
             let contacts = (sim.schedule().stages().iter())

@@ -87,6 +87,7 @@ fn each_stage_kind_is_timed_and_the_frame_is_their_sum() {
     // Fused into the integrate kernel: no time of its own.
     assert!(s.stages[StageKind::Gravity].is_zero());
     let parts = s.gather + s.stages.iter().map(|(_, t)| t).sum::<std::time::Duration>();
+    assert!(s.device.is_zero(), "no device on the CPU");
     assert_eq!(s.total(), parts + s.audit_time + s.scatter);
 }
 

@@ -10,9 +10,14 @@ use std::time::Duration;
 pub struct StepStats {
     /// Re-gathering the World into packed buffers (about zero when not `gathered`).
     pub gather: Duration,
-    /// Each stage kind's time (zero for a kind not in the schedule). On the GPU the device's
-    /// work is counted where the host waits for it: in the integrate stage.
+    /// Each stage kind's time on the host (zero for a kind not in the schedule). On the GPU a
+    /// stage's time is its encoding and its host side; the device's kernels are in
+    /// [`Self::device`].
     pub stages: StageTimes,
+    /// On the GPU, the host's waits for the device: the kernels of every stage on the device,
+    /// which run while the host waits for the state (or the contacts' impulses) to come back.
+    /// Zero on the CPU.
+    pub device: Duration,
     /// The energy audit: the dampers' pass after each substep (damped scenes only) and the
     /// energy at the frame's ends.
     pub audit_time: Duration,
@@ -133,8 +138,8 @@ impl std::fmt::Display for Failure {
 }
 
 impl StepStats {
-    /// The frame's wall time: the stages, the gather, the audit and the scatter.
+    /// The frame's wall time: the stages, the device, the gather, the audit and the scatter.
     pub fn total(&self) -> Duration {
-        self.gather + self.stages.total() + self.audit_time + self.scatter
+        self.gather + self.stages.total() + self.device + self.audit_time + self.scatter
     }
 }

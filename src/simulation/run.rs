@@ -32,6 +32,8 @@ pub(super) struct Run<'a> {
     pub(super) times: StageTimes,
     /// The audit's share of the substeps (the dampers' pass).
     pub(super) audit_time: Duration,
+    /// The host's waits for the device's work (the state or the contacts' partials back).
+    pub(super) device_time: Duration,
     /// The last lap of the stage clock.
     pub(super) lap: Instant,
     /// Whether the stages are timed ([`Simulation::set_timers`]): off, no clock is read.
@@ -56,6 +58,16 @@ impl Run<'_> {
         if self.timed {
             let now = Instant::now();
             self.times[kind] += now - self.lap;
+            self.lap = now;
+        }
+    }
+
+    /// The wall time since the last lap goes to the device's share.
+    #[cfg(feature = "gpu")]
+    fn charge_device(&mut self) {
+        if self.timed {
+            let now = Instant::now();
+            self.device_time += now - self.lap;
             self.lap = now;
         }
     }
@@ -196,14 +208,14 @@ impl Run<'_> {
         }
     }
 
-    /// Brings the device's state to the host when it is newer (counted in the integrate
-    /// stage, whose work the host waits for here).
+    /// Brings the device's state to the host when it is newer (the wait is the device's
+    /// share: its kernels run while the host waits here).
     fn state_to_host(&mut self) -> Result<(), SimError> {
         #[cfg(feature = "gpu")]
         if let Some(d) = self.device.as_mut().filter(|d| d.device_newer) {
             d.gpu.read_back(self.packed)?;
             d.device_newer = false;
-            self.charge(StageKind::Integrate);
+            self.charge_device();
             if let Some(f) = self.forces {
                 self.auditor.force_work(self.packed, &f.given);
                 self.charge_audit();
@@ -246,7 +258,7 @@ impl Run<'_> {
         let partials = d.gpu.read_partials(k, n)?;
         if self.timed {
             let now = Instant::now();
-            self.times[StageKind::Integrate] += now - self.lap;
+            self.device_time += now - self.lap;
             self.lap = now;
         }
         for slot in partials.chunks(groups * nc) {

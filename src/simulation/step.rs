@@ -141,6 +141,7 @@ impl Simulation {
             law: crate::audit::DamperLaw::of(self.config.integrator),
             times,
             audit_time: open_time,
+            device_time: Duration::ZERO,
             lap: t1,
             timed: self.timers,
         };
@@ -192,6 +193,7 @@ impl Simulation {
             frame()?
         };
         let (times, audit_time) = (run.times, run.audit_time);
+        let device_time = run.device_time;
         let projections = run
             .coupling
             .map(|mut c| c.stage().energy)
@@ -201,7 +203,7 @@ impl Simulation {
             t0,
             t1,
             gathered,
-            (times, audit_time),
+            (times, audit_time, device_time),
             beyond,
             (end, projections),
         )?;
@@ -243,7 +245,7 @@ impl Simulation {
         t0: Instant,
         t1: Instant,
         gathered: bool,
-        (times, audit_time): (StageTimes, Duration),
+        (times, audit_time, device): (StageTimes, Duration, Duration),
         beyond: Option<bool>,
         (end, projections): (f64, crate::audit::ProjectionLines),
     ) -> Result<&StepStats, SimError> {
@@ -260,6 +262,7 @@ impl Simulation {
         self.stats = StepStats {
             gather: t1 - t0,
             stages: times,
+            device,
             audit_time,
             scatter: t3 - t2,
             gathered,

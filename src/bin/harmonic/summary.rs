@@ -7,6 +7,7 @@ use harmonic::{Diagnostics, EnergyAudit, StageKind, StageTimes, StepStats};
 #[derive(Default)]
 pub struct Times {
     stages: StageTimes,
+    device: f64,
     gather: f64,
     /// The energy audit's passes (s).
     pub audit: f64,
@@ -16,6 +17,7 @@ pub struct Times {
 impl Times {
     pub fn add(&mut self, s: &StepStats) {
         self.stages += s.stages;
+        self.device += s.device.as_secs_f64();
         self.gather += s.gather.as_secs_f64();
         self.audit += s.audit_time.as_secs_f64();
         self.scatter += s.scatter.as_secs_f64();
@@ -26,15 +28,22 @@ impl Times {
         self.stages[kind].as_secs_f64()
     }
 
-    /// `frame time: 1.234 s — integrate 80.1 %, contacts 12.0 %, …`: each stage with time, then
-    /// the audit, gather and scatter.
+    /// `frame time: 1.234 s by stage: integrate 80.1 %, contacts 12.0 %, …`: each stage with
+    /// time, then the device's kernels (the GPU), the audit, gather and scatter.
     pub fn shares(&self) -> String {
-        let total = self.stages.total().as_secs_f64() + self.gather + self.audit + self.scatter;
+        let total = self.stages.total().as_secs_f64()
+            + self.device
+            + self.gather
+            + self.audit
+            + self.scatter;
         let share = |t: f64| Readable::new(100.0 * t / total.max(1e-12), 3);
         let mut parts: Vec<String> = (self.stages.iter())
             .filter(|(_, t)| !t.is_zero())
             .map(|(k, t)| format!("{} {} %", k.name(), share(t.as_secs_f64())))
             .collect();
+        if self.device > 0.0 {
+            parts.push(format!("device {} %", share(self.device)));
+        }
         for (name, t) in [
             ("audit", self.audit),
             ("gather", self.gather),
