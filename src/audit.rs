@@ -90,6 +90,22 @@ impl EnergyAudit {
     }
 }
 
+/// A line of a frame's books that a stage reports to ([`Auditor::book`]): the one interface
+/// through which each stage books its work or its projections.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Line {
+    /// [`EnergyAudit::damping`]: the integrate stage's dampers.
+    Damping,
+    /// [`EnergyAudit::forces`]: the force stages' work.
+    Forces,
+    /// [`EnergyAudit::attachments`]: the contact stage's attached particles.
+    Attachments,
+    /// [`EnergyAudit::contacts`]: the contact stage's push-out.
+    Contacts,
+    /// [`EnergyAudit::friction`]: the contact stage's friction.
+    Friction,
+}
+
 /// What the projections of a contact stage did to the cloth's energy in a frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ProjectionLines {
@@ -99,6 +115,17 @@ pub struct ProjectionLines {
     pub contacts: f64,
     /// [`EnergyAudit::friction`].
     pub friction: f64,
+}
+
+impl ProjectionLines {
+    /// The lines with their amounts, for [`Auditor::book`].
+    pub fn lines(&self) -> [(Line, f64); 3] {
+        [
+            (Line::Attachments, self.attachments),
+            (Line::Contacts, self.contacts),
+            (Line::Friction, self.friction),
+        ]
+    }
 }
 
 /// How a damper's discrete work over a substep is booked.
@@ -320,14 +347,14 @@ impl Auditor {
             }
         });
         self.x0 = x0;
-        self.frame.forces += work;
+        self.book(Line::Forces, work);
     }
 
     /// What the dampers dissipated over the substep of `h` just taken (from the state
     /// [`Self::begin_substep`] kept), booked on the frame with `booked`, what the grid pass
     /// booked itself.
     pub fn damping(&mut self, packed: &Packed, law: DamperLaw, h: f64, booked: f64) {
-        self.frame.damping += booked;
+        self.book(Line::Damping, booked);
         if !self.damped {
             return;
         }
@@ -348,7 +375,7 @@ impl Auditor {
             )
         });
         (self.x0, self.v0) = (x0, v0);
-        self.frame.damping += loss;
+        self.book(Line::Damping, loss);
     }
 
     /// Opens the books of a frame: `start` is `E` after the game's edits, which are booked as
@@ -370,13 +397,23 @@ impl Auditor {
         };
     }
 
+    /// Books `joules` on the frame's `line`: what a stage did (work put in, or energy its
+    /// dampers or projections removed, each with the sign of its line).
+    pub fn book(&mut self, line: Line, joules: f64) {
+        let f = &mut self.frame;
+        *match line {
+            Line::Damping => &mut f.damping,
+            Line::Forces => &mut f.forces,
+            Line::Attachments => &mut f.attachments,
+            Line::Contacts => &mut f.contacts,
+            Line::Friction => &mut f.friction,
+        } += joules;
+    }
+
     /// Closes the frame's books at `end` (J); `quarantined`: the frame froze particles.
-    pub fn end_frame(&mut self, end: f64, projections: ProjectionLines, quarantined: bool) {
+    pub fn end_frame(&mut self, end: f64, quarantined: bool) {
         let f = &mut self.frame;
         f.energy = end;
-        f.attachments = projections.attachments;
-        f.contacts = projections.contacts;
-        f.friction = projections.friction;
         let unexplained = end - f.start - f.edits - f.attachments - f.forces
             + f.damping
             + f.contacts

@@ -68,7 +68,7 @@ pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
-pub use schedule::{Cadence, Failure, Schedule, Stage, StageKind, StageTimes, StepStats};
+pub use schedule::{Cadence, Failure, Place, Schedule, Stage, StageKind, StageTimes, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
 pub use step_control::StepChoice;
 

@@ -53,6 +53,39 @@ fn a_scene_lists_only_the_stages_it_needs() {
     assert!(sim.stats().stages[Contacts].is_zero());
 }
 
+/// The list is in frame order: every kind in `StageKind::ALL`'s order, forces before the
+/// integrate stage and projections after it, each kind once.
+#[test]
+fn every_list_keeps_the_frame_order() {
+    let scene = Scene::parse(FALLING_CLOTH, "falling cloth").expect("parses");
+    let mut lists = vec![
+        load("chain.ron"),
+        load("drape_sphere.ron"),
+        load("cape.ron"),
+    ];
+    lists.push(Simulation::from_scene(&scene).expect("builds"));
+    for sim in &mut lists {
+        let n = sim.positions().len();
+        sim.set_forces(&vec![DVec3::X; n])
+            .expect("one per particle");
+        sim.step().expect("steps");
+        let order = |k: &StageKind| StageKind::ALL.iter().position(|a| a == k);
+        let kinds = kinds(sim.schedule());
+        assert!(
+            kinds.windows(2).all(|w| order(&w[0]) < order(&w[1])),
+            "{kinds:?}"
+        );
+        assert!(kinds.windows(2).all(|w| w[0].place() <= w[1].place()));
+        assert_eq!(
+            kinds
+                .iter()
+                .filter(|k| k.place() == harmonic::Place::Integrate)
+                .count(),
+            1
+        );
+    }
+}
+
 #[test]
 fn the_listing_follows_the_substeps_and_the_settings() {
     let mut sim = load("hanging_cloth.ron");

@@ -73,6 +73,15 @@ impl StageKind {
         }
     }
 
+    /// Where the stage sits against the integrate stage.
+    pub fn place(self) -> Place {
+        match self {
+            StageKind::Gravity | StageKind::Forces => Place::BeforeIntegrate,
+            StageKind::Integrate => Place::Integrate,
+            StageKind::Contacts | StageKind::Quarantine => Place::AfterIntegrate,
+        }
+    }
+
     /// What the stage books in the frame's energy audit ([`crate::EnergyAudit`]).
     pub fn books(self) -> &'static str {
         match self {
@@ -87,6 +96,17 @@ impl StageKind {
     fn index(self) -> usize {
         self as usize
     }
+}
+
+/// Where a stage sits against the integrate stage ([`StageKind::place`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Place {
+    /// Before: a force summed into the external acceleration the kernel reads.
+    BeforeIntegrate,
+    /// The integrate stage itself.
+    Integrate,
+    /// After: a projection or check on the substep's new state.
+    AfterIntegrate,
 }
 
 /// How often a stage runs within a frame.

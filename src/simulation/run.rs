@@ -113,6 +113,26 @@ impl Run<'_> {
         Ok(())
     }
 
+    /// The stages' `prepare(h)`: what each caches for a substep of `h` (the integrate stage's
+    /// coefficients), when the frame changes its step (a retry at more substeps).
+    pub(super) fn prepare(&mut self, h: f64) -> Result<(), SimError> {
+        for s in self.schedule.stages() {
+            if s.kind == StageKind::Integrate && s.on == Backend::Cpu {
+                self.solver.prepare(self.packed, h)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The stages' frame end: the contact stage books its projections on the frame's lines.
+    pub(super) fn book_frame(&mut self) {
+        if let Some(c) = self.coupling.as_mut() {
+            for (line, joules) in c.stage().energy.lines() {
+                self.auditor.book(line, joules);
+            }
+        }
+    }
+
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
         if stage.kind != StageKind::Contacts {

@@ -177,8 +177,9 @@ impl Simulation {
                 run.auditor.frame.forces = work;
                 *substeps_out = more;
                 h = dt / more as f64;
-                run.solver.prepare(run.packed, h)?;
+                run.prepare(h)?;
             };
+            run.book_frame();
             // The strain check reads the frame's end state inside the same job.
             let beyond = limit
                 .is_finite()
@@ -194,10 +195,6 @@ impl Simulation {
         };
         let (times, audit_time) = (run.times, run.audit_time);
         let device_time = run.device_time;
-        let projections = run
-            .coupling
-            .map(|mut c| c.stage().energy)
-            .unwrap_or_default();
         self.config.substeps = substeps;
         self.finish_frame(
             t0,
@@ -205,7 +202,7 @@ impl Simulation {
             gathered,
             (times, audit_time, device_time),
             beyond,
-            (end, projections),
+            end,
         )?;
         // The accuracy controller runs on the CPU: on the device the substeps stay at the
         // stability floor's (the device's contact slots are sized for them).
@@ -247,14 +244,14 @@ impl Simulation {
         gathered: bool,
         (times, audit_time, device): (StageTimes, Duration, Duration),
         beyond: Option<bool>,
-        (end, projections): (f64, crate::audit::ProjectionLines),
+        end: f64,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
         self.quarantine();
         self.steps += 1;
         self.time += self.config.dt;
         let quarantined = std::mem::take(&mut self.newly_quarantined);
-        self.auditor.end_frame(end, projections, quarantined > 0);
+        self.auditor.end_frame(end, quarantined > 0);
         self.packed.scatter(&mut self.world);
         let failure = self.check_strain(beyond).or_else(|| self.check_energy());
         self.failure = self.failure.or(failure);

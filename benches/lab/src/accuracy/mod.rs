@@ -206,7 +206,7 @@ pub fn simulate(
         // Strain every 8th step (and the last): a full pass costs as much as a step.
         if step % 8 == 0 || step == steps {
             let e = books.energy(&p, g);
-            books.end_frame(e, Default::default(), false);
+            books.end_frame(e, false);
             books.begin_frame(e, e_ref);
             let strain = metrics::max_strain(&p);
             if strain.is_nan() || strain > stability::BLOWUP_STRAIN {
