@@ -4,11 +4,13 @@ use super::*;
 use crate::schedule::{StageKind, StageTimes};
 
 impl Simulation {
-    /// Advances one frame of `dt`. Stages, in order:
-    /// 1. gather: World → buffers, only if the World may have changed (see [`Self::world_mut`]);
-    /// 2. integrate: `substeps` substeps on the buffers (no allocation), each followed by the
-    ///    contact stage when the scene has bodies;
-    /// 3. scatter: buffers → World.
+    /// Advances one frame of `dt` by running the scene's stages ([`Self::schedule`]):
+    /// 1. frame start: gather (World → buffers, only if the World may have changed, see
+    ///    [`Self::world_mut`]), the schedule rebuilt, the energy books opened, the force stage's
+    ///    accelerations when forces are set ([`Self::set_forces`]);
+    /// 2. `substeps` substeps on the buffers (no allocation): integrate, then the contact stage
+    ///    when the scene has bodies, then the quarantine's check;
+    /// 3. frame end: the books closed, buffers → World (scatter), the strain and energy checks.
     ///
     /// A scene without colliders has no contact stage. The state the World gets is always
     /// finite: a particle gone non-finite is quarantined ([`Self::quarantined`]).
