@@ -1,4 +1,5 @@
-// The GPU step: the WGSL mirror of src/integrate/mod.rs (spring_pass, particle_pass),
+// The GPU step: the WGSL mirror of src/integrate/mod.rs (spring_pass),
+// src/integrate/particles.rs (particle_pass, External),
 // src/integrate/grid/ (the cloth grid pass: mod.rs, band.rs) and src/integrate/gauss_seidel.rs (add_gravity,
 // sweep, drift). Each function names its Rust mirror;
 // tests/gpu.rs holds the two together. No atomics: every particle gathers its springs' changes
@@ -79,7 +80,7 @@ struct Range {
 // The external acceleration per particle, xyz (FORCES only; one unread element otherwise).
 @group(0) @binding(9) var<storage, read> accel: array<vec4<f32>>;
 
-// Mirrors integrate::External::at: particle i's external acceleration.
+// Mirrors integrate::particles::External::at: particle i's external acceleration.
 fn external_accel(i: u32) -> vec3<f32> {
     if FORCES {
         return accel[i].xyz;
@@ -204,7 +205,7 @@ fn grid_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgrou
     sdv[params.springs + i] = vec4<f32>(dv, 0.0);
 }
 
-// Mirrors integrate::particle_pass (and, for a grid's particles, the move at the end of
+// Mirrors integrate::particles::particle_pass (and, for a grid's particles, the move at the end of
 // grid::Ctx::band): each particle gathers its springs' changes and moves.
 @compute @workgroup_size(WORKGROUP)
 fn particle_pass(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {

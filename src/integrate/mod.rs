@@ -9,6 +9,7 @@ pub mod implicit;
 pub mod multigrid;
 pub mod paper;
 pub(crate) mod par;
+mod particles;
 pub mod xpbd;
 
 use glam::DVec3;
@@ -18,6 +19,9 @@ pub use crate::config::Integrator;
 use crate::error::SimError;
 use harmonic::Linear;
 use paper::PaperSpring;
+pub(crate) use particles::euler_move;
+pub use particles::External;
+use particles::{acceleration, particle_pass};
 
 /// Sweeps of `harmonic-sgs`, alternating direction, each applying 1/SGS_SWEEPS of the impulse.
 pub const SGS_SWEEPS: usize = 2;
@@ -52,27 +56,6 @@ pub(crate) enum Update {
     Exact,
     /// Algorithm 1 as printed: `v += h Δv + g h; x += h v`.
     PaperAlgorithm1,
-}
-
-/// The external acceleration the integrators add where they read gravity: gravity alone, a
-/// constant, or per particle (gravity included) when the schedule lists a force stage.
-#[derive(Clone, Copy, Debug)]
-pub enum External<'a> {
-    /// The same acceleration for every particle.
-    Uniform(DVec3),
-    /// One acceleration per particle, in packed order.
-    PerParticle(&'a [DVec3]),
-}
-
-impl External<'_> {
-    /// Particle `i`'s external acceleration.
-    #[inline(always)]
-    pub fn at(self, i: usize) -> DVec3 {
-        match self {
-            External::Uniform(g) => g,
-            External::PerParticle(a) => a[i],
-        }
-    }
 }
 
 /// Per-scene solver state: step coefficients for the current `h` and scratch, sized at gather.
@@ -549,80 +532,4 @@ fn spring_pass(
             *out = phi * n;
         }),
     }
-}
-
-/// Symplectic (velocity first) or explicit (position first) Euler: one particle's move with
-/// its springs' velocity change `dv`.
-#[inline(always)]
-pub(crate) fn euler_move(
-    update: Update,
-    x: DVec3,
-    v: DVec3,
-    dv: DVec3,
-    g: DVec3,
-    h: f64,
-) -> (DVec3, DVec3) {
-    if update == Update::PositionFirst {
-        (x + h * v, v + (dv + g * h))
-    } else {
-        let v = v + (dv + g * h);
-        (x + h * v, v)
-    }
-}
-
-/// Pass 2: each particle in no grid gathers its springs' changes and moves.
-fn particle_pass(
-    packed: &mut Packed,
-    sdv: &[DVec3],
-    sdx: &[DVec3],
-    g: External<'_>,
-    h: f64,
-    update: Update,
-) {
-    let Packed {
-        topology,
-        x,
-        v,
-        inv_mass,
-        incidence,
-        ..
-    } = packed;
-    let loose = &topology.loose;
-    let (inv_mass, inc) = (&inv_mass[..], &*incidence);
-    for range in loose.iter() {
-        let first = range.start;
-        let (x, v) = (&mut x[range.clone()], &mut v[range.clone()]);
-        par::each2(x, v, |k, xi, vi| {
-            let i = first + k;
-            if inv_mass[i] == 0.0 {
-                return;
-            }
-            let dv = inc.sum(sdv, i);
-            let g = g.at(i);
-            match update {
-                Update::VelocityFirst | Update::PositionFirst => {
-                    (*xi, *vi) = euler_move(update, *xi, *vi, dv, g, h);
-                }
-                Update::Exact => {
-                    *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
-                    *vi += dv + g * h;
-                }
-                Update::PaperAlgorithm1 => {
-                    *vi += h * dv + g * h;
-                    *xi += h * *vi;
-                }
-            }
-        });
-    }
-}
-
-/// Accelerations from per-spring relative accelerations (RK4's derivative).
-fn acceleration(packed: &Packed, sdv: &[DVec3], g: External<'_>, out: &mut [DVec3]) {
-    par::each(out, |i, a| {
-        *a = if packed.inv_mass[i] == 0.0 {
-            DVec3::ZERO
-        } else {
-            packed.incidence.sum(sdv, i) + g.at(i)
-        };
-    });
 }
