@@ -19,9 +19,9 @@ pub use crate::config::Integrator;
 use crate::error::SimError;
 use harmonic::Linear;
 use paper::PaperSpring;
-pub(crate) use particles::euler_move;
 pub use particles::External;
 use particles::{acceleration, particle_pass};
+pub(crate) use particles::{euler_move, Accel, Constant};
 
 /// Sweeps of `harmonic-sgs`, alternating direction, each applying 1/SGS_SWEEPS of the impulse.
 pub const SGS_SWEEPS: usize = 2;

@@ -27,6 +27,31 @@ impl External<'_> {
     }
 }
 
+/// A particle's external acceleration as a hot loop reads it, the loop compiled once per kind:
+/// a constant where there are no forces, so that loop has no per-particle branch.
+pub(crate) trait Accel: Copy {
+    /// Particle `i`'s external acceleration.
+    fn at(self, i: usize) -> DVec3;
+}
+
+/// The same acceleration for every particle ([`External::Uniform`]).
+#[derive(Clone, Copy)]
+pub(crate) struct Constant(pub(crate) DVec3);
+
+impl Accel for Constant {
+    #[inline(always)]
+    fn at(self, _: usize) -> DVec3 {
+        self.0
+    }
+}
+
+impl Accel for &[DVec3] {
+    #[inline(always)]
+    fn at(self, i: usize) -> DVec3 {
+        self[i]
+    }
+}
+
 /// Symplectic (velocity first) or explicit (position first) Euler: one particle's move with
 /// its springs' velocity change `dv`.
 #[inline(always)]

@@ -125,34 +125,41 @@ pub(super) struct Ctx<'a> {
 }
 
 impl Ctx<'_> {
-    /// The band, compiled for the chosen vector unit.
+    /// The band, compiled for the chosen vector unit and the kind of external acceleration.
     fn band(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
+        match self.shared.g {
+            External::Uniform(g) => self.band_with(b, x, v, Constant(g)),
+            External::PerParticle(a) => self.band_with(b, x, v, a),
+        }
+    }
+
+    fn band_with<A: Accel>(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3], g: A) {
         match self.shared.vector {
-            Vector::Portable => self.band_rows(b, x, v),
+            Vector::Portable => self.band_rows(b, x, v, g),
             // SAFETY: `Vector::available` found the feature on this CPU.
             #[cfg(target_arch = "x86_64")]
-            Vector::Avx2 => unsafe { self.band_avx2(b, x, v) },
+            Vector::Avx2 => unsafe { self.band_avx2(b, x, v, g) },
             // SAFETY: as above.
             #[cfg(target_arch = "x86_64")]
-            Vector::Avx512 => unsafe { self.band_avx512(b, x, v) },
+            Vector::Avx512 => unsafe { self.band_avx512(b, x, v, g) },
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    fn band_avx512(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
-        self.band_rows(b, x, v);
+    fn band_avx512<A: Accel>(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3], g: A) {
+        self.band_rows(b, x, v, g);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn band_avx2(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
-        self.band_rows(b, x, v);
+    fn band_avx2<A: Accel>(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3], g: A) {
+        self.band_rows(b, x, v, g);
     }
 
     /// The band's rows in order: the springs anchored in each, then the row's move.
     #[inline(always)]
-    fn band_rows(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3]) {
+    fn band_rows<A: Accel>(&self, b: &mut Band, x: &mut [DVec3], v: &mut [DVec3], accel: A) {
         let (cols, reach, rows) = (self.cols, self.reach, self.grid.rows as usize);
         let (r0, r1) = (b.rows.start, b.rows.end);
         let slot = |r: usize| (r % (reach + 1)) * cols;
@@ -249,7 +256,6 @@ impl Ctx<'_> {
                 let Shared {
                     incidence,
                     sdv,
-                    g,
                     h,
                     update,
                     ..
@@ -262,7 +268,7 @@ impl Ctx<'_> {
                         let sum = DVec3::new(ring[0][s + c], ring[1][s + c], ring[2][s + c]);
                         let dv = sum + incidence.sum(sdv, self.grid.base as usize + i);
                         let v0 = v[k];
-                        let g = g.at(self.grid.base as usize + i);
+                        let g = accel.at(self.grid.base as usize + i);
                         (x[k], v[k]) = euler_move(update, x[k], v[k], dv, g, h);
                         if audit {
                             // The dampers' impulse on this particle does J·(v₀ + v₁)/2.

@@ -22,7 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::harmonic::{self, Linear};
-use super::{axial, euler_move, par, External, Update};
+use super::{axial, euler_move, par, Accel, Constant, External, Update};
 use crate::buffers::{Incidence, Packed, PackedGrid};
 use crate::components::GridLink;
 
