@@ -69,12 +69,12 @@ impl Simulation {
 
     /// The device's kernels are specialised to the force stage's presence: a change re-uploads
     /// at the next step.
+    #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn device_needs_forces(&mut self, listed: bool) {
         #[cfg(feature = "gpu")]
         if self.gpu.is_some() && self.forces.is_some() != listed {
             self.dirty = true;
         }
-        let _ = listed;
     }
 
     /// The forces set by [`Self::set_forces`] (N, scene order), if any.

@@ -134,6 +134,7 @@ impl Run<'_> {
     }
 
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
+    #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
         if stage.kind != StageKind::Contacts {
             return;
@@ -156,7 +157,6 @@ impl Run<'_> {
             }
             _ => {}
         }
-        let _ = (k, n, h);
         self.charge(StageKind::Contacts);
     }
 

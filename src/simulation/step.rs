@@ -183,9 +183,7 @@ impl Simulation {
             };
             run.book_frame();
             // The strain check reads the frame's end state inside the same job.
-            let beyond = limit
-                .is_finite()
-                .then(|| crate::metrics::beyond(run.packed, limit));
+            let beyond = limit.is_finite() && crate::metrics::beyond(run.packed, limit);
             Ok::<_, SimError>((end, beyond))
         };
         let (end, beyond) = if self.parallel {
@@ -238,14 +236,14 @@ impl Simulation {
 
     /// The end of a frame: the quarantine (the state is finite: every substep ended with
     /// [`contain`]), the energy books closed at `end` (taken in the frame's job), then the
-    /// scatter and the checks (`beyond`: the strain check's answer, when the job took it).
+    /// scatter and the checks (`beyond`: a spring is past the strain limit, as the job found).
     pub(super) fn finish_frame(
         &mut self,
         t0: Instant,
         t1: Instant,
         gathered: bool,
         (times, audit_time, device): (StageTimes, Duration, Duration),
-        beyond: Option<bool>,
+        beyond: bool,
         end: f64,
     ) -> Result<&StepStats, SimError> {
         let t2 = Instant::now();
@@ -301,12 +299,9 @@ impl Simulation {
 
     /// The strain limit, checked on the frame's end state: one read of the springs, and the
     /// worst spring looked up only when the limit is passed.
-    fn check_strain(&self, beyond: Option<bool>) -> Option<crate::Failure> {
+    fn check_strain(&self, beyond: bool) -> Option<crate::Failure> {
         let limit = self.config.strain_limit;
-        if !limit.is_finite() {
-            return None;
-        }
-        if !beyond.unwrap_or_else(|| crate::metrics::beyond(&self.packed, limit)) {
+        if !beyond {
             return None;
         }
         let worst = crate::metrics::most_stretched(&self.packed, self.config.h())?;
