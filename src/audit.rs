@@ -148,10 +148,9 @@ impl DamperLaw {
     pub fn of(integrator: Integrator) -> Self {
         use Integrator::*;
         match integrator {
-            SymplecticEuler | ExplicitEuler | Rk4 => DamperLaw::Start,
+            SymplecticEuler | ExplicitEuler => DamperLaw::Start,
             ImplicitEuler | ThetaMg | Xpbd => DamperLaw::End,
-            Harmonic | HarmonicGs | HarmonicSgs | HarmonicForced | HarmonicForcedGs
-            | HarmonicPaper => DamperLaw::Mid,
+            Harmonic | HarmonicGs => DamperLaw::Mid,
         }
     }
 }

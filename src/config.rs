@@ -8,33 +8,21 @@ use glam::DVec3;
 
 use crate::error::SimError;
 
-/// The integrators, all over the same packed buffers. The research ones
-/// ([`Integrator::is_research`]) stay selectable by name for comparison and study; a game picks
-/// among the others.
+/// The integrators a game may choose, all over the same packed buffers. The research variants
+/// (the paper's printed step, the forced and symmetric closed forms, the RK4 reference) live in
+/// the lab crate (`benches/lab`, [`RESEARCH_INTEGRATORS`]), which runs them for its figures.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum Integrator {
     /// The corrected closed-form spring step, summed per particle (Jacobi).
     Harmonic,
-    /// Research: the paper's equations as printed, for comparison only.
-    HarmonicPaper,
     /// `v += a h; x += v h`. The default: fastest at ≤ 1 cm error on the 128×128 cloth
     /// (`harmonic-lab bench`, benches/lab/BENCHMARKS.md).
     #[default]
     SymplecticEuler,
     /// `x += v h; v += a h`.
     ExplicitEuler,
-    /// Research: classical fourth-order Runge–Kutta, the fine-step reference.
-    Rk4,
     /// The closed form applied spring by spring in Gauss–Seidel order over a colouring.
     HarmonicGs,
-    /// Research: each spring's oscillator forced by the other forces, frozen at the start of
-    /// the step.
-    HarmonicForced,
-    /// Research: forced, in Gauss–Seidel order.
-    HarmonicForcedGs,
-    /// Research: symmetric Gauss–Seidel, a forward then a backward colour sweep, each applying half of
-    /// the closed-form impulse for the full step.
-    HarmonicSgs,
     /// Baraff–Witkin implicit Euler: one Newton step, conjugate gradients.
     ImplicitEuler,
     /// Small-step XPBD, one iteration per substep.
@@ -44,35 +32,26 @@ pub enum Integrator {
     ThetaMg,
 }
 
-impl Integrator {
-    /// Whether it is a research variant, kept for comparison and study rather than for games:
-    /// the paper's printed equations, the forced and symmetric closed-form variants, and the
-    /// RK4 reference.
-    pub fn is_research(self) -> bool {
-        matches!(
-            self,
-            Integrator::HarmonicPaper
-                | Integrator::HarmonicForced
-                | Integrator::HarmonicForcedGs
-                | Integrator::HarmonicSgs
-                | Integrator::Rk4
-        )
-    }
+/// The research integrators' names, which the lab runs and the engine refuses with
+/// [`SimError::ResearchIntegrator`].
+pub const RESEARCH_INTEGRATORS: [&str; 5] = [
+    "harmonic-sgs",
+    "harmonic-forced",
+    "harmonic-forced-gs",
+    "harmonic-paper",
+    "rk4",
+];
 
+impl Integrator {
     /// Every integrator, in the order messages list their names.
-    pub const ALL: [Integrator; 12] = [
+    pub const ALL: [Integrator; 7] = [
         Integrator::Harmonic,
         Integrator::HarmonicGs,
-        Integrator::HarmonicSgs,
-        Integrator::HarmonicForced,
-        Integrator::HarmonicForcedGs,
-        Integrator::HarmonicPaper,
         Integrator::SymplecticEuler,
         Integrator::ExplicitEuler,
         Integrator::ImplicitEuler,
         Integrator::Xpbd,
         Integrator::ThetaMg,
-        Integrator::Rk4,
     ];
 
     /// Whether it steps cloth grids ([`crate::buffers::PackedGrid`]) as they are on the CPU,
@@ -98,23 +77,12 @@ impl Integrator {
     /// Whether its spring step is the closed-form oscillator (the harmonic family), whose
     /// impulse vanishes or reverses at whole multiples of a spring's `h_c`.
     pub fn uses_closed_form(self) -> bool {
-        matches!(
-            self,
-            Integrator::Harmonic
-                | Integrator::HarmonicPaper
-                | Integrator::HarmonicGs
-                | Integrator::HarmonicSgs
-                | Integrator::HarmonicForced
-                | Integrator::HarmonicForcedGs
-        )
+        matches!(self, Integrator::Harmonic | Integrator::HarmonicGs)
     }
 
     /// Whether it applies the closed form spring by spring in colour order (Gauss–Seidel).
     pub(crate) fn sweeps(self) -> bool {
-        matches!(
-            self,
-            Integrator::HarmonicGs | Integrator::HarmonicSgs | Integrator::HarmonicForcedGs
-        )
+        self == Integrator::HarmonicGs
     }
 
     /// Whether it needs the springs' colouring (the Gauss–Seidel sweeps and XPBD).
@@ -126,14 +94,9 @@ impl Integrator {
     pub fn name(self) -> &'static str {
         match self {
             Integrator::Harmonic => "harmonic",
-            Integrator::HarmonicPaper => "harmonic-paper",
             Integrator::SymplecticEuler => "symplectic-euler",
             Integrator::ExplicitEuler => "explicit-euler",
-            Integrator::Rk4 => "rk4",
             Integrator::HarmonicGs => "harmonic-gs",
-            Integrator::HarmonicSgs => "harmonic-sgs",
-            Integrator::HarmonicForced => "harmonic-forced",
-            Integrator::HarmonicForcedGs => "harmonic-forced-gs",
             Integrator::ImplicitEuler => "implicit-euler",
             Integrator::Xpbd => "xpbd",
             Integrator::ThetaMg => "theta-mg",
@@ -153,7 +116,13 @@ impl FromStr for Integrator {
         Integrator::ALL
             .into_iter()
             .find(|i| i.name() == s)
-            .ok_or_else(|| SimError::UnknownIntegrator(s.to_string()))
+            .ok_or_else(|| {
+                if RESEARCH_INTEGRATORS.contains(&s) {
+                    SimError::ResearchIntegrator(s.to_string())
+                } else {
+                    SimError::UnknownIntegrator(s.to_string())
+                }
+            })
     }
 }
 

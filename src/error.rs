@@ -97,6 +97,15 @@ pub enum SimError {
     /// An integrator name matches none of [`crate::Integrator::ALL`].
     #[error("unknown integrator `{0}` (known: {known})", known = known_integrators())]
     UnknownIntegrator(String),
+    /// An integrator name is one of the research variants ([`crate::RESEARCH_INTEGRATORS`]),
+    /// which the lab runs and a game does not.
+    #[error(
+        "integrator `{0}` is a research variant: it moved to the lab crate, where \
+         `harmonic-lab bench --integrators {0}` and `harmonic-lab stability` run it (a scene \
+         names one of: {known})",
+        known = known_integrators()
+    )]
+    ResearchIntegrator(String),
     /// A back-end name is not `cpu`, `gpu` or `auto`.
     #[error("unknown backend `{0}` (known: cpu, gpu, auto)")]
     UnknownBackend(String),
@@ -229,16 +238,6 @@ pub enum SimError {
     /// ([`crate::Integrator::runs_on_grids`]); the packed buffers must have them expanded.
     #[error("{0} does not step cloth grids kept whole (gather with them expanded)")]
     GridsUnsupported(crate::config::Integrator),
-    /// `harmonic-paper` has no value for a spring with ζ > 1/√2 (eq. 27 as printed).
-    #[error(
-        "harmonic-paper is undefined for spring {spring}: eq. 27 as printed takes √(1 − 2ζ²) with ζ = {zeta:.3} > 0.707"
-    )]
-    PaperUndefined {
-        /// The spring's index among the packed springs.
-        spring: usize,
-        /// The spring's true damping ratio ζ.
-        zeta: f64,
-    },
 }
 
 /// Why the GPU back end could not run.

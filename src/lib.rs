@@ -63,7 +63,7 @@ pub use audit::EnergyAudit;
 pub use components::{
     ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
 };
-pub use config::{Backend, Integrator, SimConfig};
+pub use config::{Backend, Integrator, SimConfig, RESEARCH_INTEGRATORS};
 pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};
 pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};

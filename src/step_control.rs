@@ -162,27 +162,29 @@ fn power_iteration(packed: &Packed, iterations: usize) -> f64 {
 /// Largest stable `ω_max h` of an integrator at damping ratio `zeta`, or `None` when it has no
 /// stability limit.
 pub fn stable_omega_h(integrator: Integrator, zeta: f64) -> Option<f64> {
-    let table: [f64; ZETAS.len()] = match integrator {
+    let table = match integrator {
         Integrator::ImplicitEuler | Integrator::Xpbd | Integrator::ThetaMg => return None,
-        Integrator::SymplecticEuler => TABLE_SE,
-        Integrator::ExplicitEuler => TABLE_EE,
-        Integrator::Harmonic | Integrator::HarmonicPaper => TABLE_H,
-        Integrator::HarmonicForced => TABLE_HF,
-        Integrator::HarmonicGs => TABLE_GS,
-        Integrator::HarmonicSgs => TABLE_SGS,
-        Integrator::HarmonicForcedGs => TABLE_FGS,
-        Integrator::Rk4 => TABLE_RK4,
+        Integrator::SymplecticEuler => &TABLE_SE,
+        Integrator::ExplicitEuler => &TABLE_EE,
+        Integrator::Harmonic => &TABLE_H,
+        Integrator::HarmonicGs => &TABLE_GS,
     };
+    Some(on_table(table, zeta))
+}
+
+/// A stability table's `ω_max h` at damping ratio `zeta`: measured at each of [`ZETAS`], the
+/// reciprocal interpolated between them, falling as `1/ζ` past the last.
+pub fn on_table(table: &[f64; ZETAS.len()], zeta: f64) -> f64 {
     let last = ZETAS.len() - 1;
     let zeta = zeta.max(0.0);
     if zeta >= ZETAS[last] {
-        return Some(table[last] * ZETAS[last] / zeta);
+        return table[last] * ZETAS[last] / zeta;
     }
     let k = (0..last)
         .find(|&k| zeta <= ZETAS[k + 1])
         .unwrap_or(last - 1);
     let t = (zeta - ZETAS[k]) / (ZETAS[k + 1] - ZETAS[k]);
-    Some(1.0 / (1.0 / table[k] + t * (1.0 / table[k + 1] - 1.0 / table[k])))
+    1.0 / (1.0 / table[k] + t * (1.0 / table[k + 1] - 1.0 / table[k]))
 }
 
 /// XPBD's `ω_max h` per substep: an accuracy bound, not a stability limit (it has none). One
@@ -204,41 +206,14 @@ pub const TABLE_SE: [f64; 11] = [
 pub const TABLE_EE: [f64; 11] = [
     0.05, 0.215, 0.408, 0.604, 0.805, 1.001, 0.947, 0.634, 0.49, 0.313, 0.228,
 ];
-/// `harmonic`'s and `harmonic-paper`'s measured stable `ω_max h` at each of [`ZETAS`].
+/// `harmonic`'s measured stable `ω_max h` at each of [`ZETAS`].
 pub const TABLE_H: [f64; 11] = [
     1.455, 1.286, 1.133, 1.015, 0.905, 0.812, 0.736, 0.617, 0.524, 0.372, 0.287,
-];
-/// `harmonic-forced`'s measured stable `ω_max h` at each of [`ZETAS`].
-pub const TABLE_HF: [f64; 11] = [
-    1.616, 1.798, 1.616, 1.32, 1.1, 0.939, 0.812, 0.634, 0.516, 0.355, 0.262,
 ];
 /// Held by the single spring's plain-update limit at low damping.
 pub const TABLE_GS: [f64; 11] = [
     1.72, 1.798, 1.971, 3.294, 3.432, 3.632, 3.934, 5.273, 8.884, 20.0, 20.0,
 ];
-/// Symmetric sweeps: the single spring caps it at h = h_c (ω h = π) when lightly damped.
-pub const TABLE_SGS: [f64; 11] = [
-    std::f64::consts::PI,
-    3.157,
-    3.208,
-    3.294,
-    3.428,
-    3.632,
-    3.934,
-    5.27,
-    8.884,
-    20.0,
-    20.0,
-];
-/// `harmonic-forced-gs`'s measured stable `ω_max h` at each of [`ZETAS`].
-pub const TABLE_FGS: [f64; 11] = [
-    1.72, 1.798, 1.616, 1.32, 1.1, 0.939, 0.812, 0.634, 0.516, 0.355, 0.262,
-];
-/// RK4's measured stable `ω_max h` at each of [`ZETAS`].
-pub const TABLE_RK4: [f64; 11] = [
-    2.826, 2.927, 2.665, 2.648, 2.618, 1.878, 1.311, 0.888, 0.685, 0.44, 0.321,
-];
-
 /// Fraction of the measured limit the controller uses.
 pub const SAFETY: f64 = 0.8;
 /// Never more substeps than this per frame; a scene needing more gets it with a warning.
@@ -300,18 +275,25 @@ impl Network {
 
     /// Substeps for a frame of `dt` with `integrator` on this network.
     pub fn choose(&self, integrator: Integrator, dt: f64) -> StepChoice {
-        let Self {
-            omega_max,
-            zeta_range,
-        } = *self;
+        let (lo, hi) = self.zeta_range;
         let limit = match (
-            stable_omega_h(integrator, zeta_range.0),
-            stable_omega_h(integrator, zeta_range.1),
+            stable_omega_h(integrator, lo),
+            stable_omega_h(integrator, hi),
         ) {
             (Some(a), Some(b)) => Some(SAFETY * a.min(b)),
             _ if integrator == Integrator::Xpbd => Some(XPBD_OMEGA_H),
             _ => None,
         };
+        self.choose_within(limit, dt)
+    }
+
+    /// Substeps for a frame of `dt` keeping `ω_max h` within `limit` (safety factor applied;
+    /// `None`: no limit, one substep). The lab chooses its research integrators' steps with it.
+    pub fn choose_within(&self, limit: Option<f64>, dt: f64) -> StepChoice {
+        let Self {
+            omega_max,
+            zeta_range,
+        } = *self;
         let (substeps, capped) = match limit {
             Some(c) if omega_max > 0.0 => {
                 let k = (dt * omega_max / c).ceil().max(1.0);

@@ -144,21 +144,24 @@ fn overrides_apply() {
         stdout.contains("steps: 50 frame(s), 100 substep(s)"),
         "{stdout}"
     );
-    // A research integrator runs, and the summary says what it is.
-    let research = harmonic(&[
-        "run",
-        "scenes/explicit_pair.ron",
-        "--seconds",
-        "0.1",
-        "--integrator",
-        "rk4",
-    ]);
-    let stdout = String::from_utf8_lossy(&research.stdout);
-    assert!(research.status.success(), "{stdout}");
-    assert!(
-        stdout.contains("integrator: rk4 (research), dt"),
-        "{stdout}"
-    );
+    // A research integrator is the lab's: refused, with where to find it.
+    for name in harmonic::RESEARCH_INTEGRATORS {
+        let research = harmonic(&[
+            "run",
+            "scenes/explicit_pair.ron",
+            "--seconds",
+            "0.1",
+            "--integrator",
+            name,
+        ]);
+        let stderr = String::from_utf8_lossy(&research.stderr);
+        assert_eq!(research.status.code(), Some(2), "{name}: {stderr}");
+        assert!(
+            stderr.contains(&format!("integrator `{name}` is a research variant"))
+                && stderr.contains(&format!("harmonic-lab bench --integrators {name}")),
+            "{stderr}"
+        );
+    }
     let bad = harmonic(&[
         "run",
         "scenes/explicit_pair.ron",
@@ -188,7 +191,7 @@ fn the_aliasing_warning_is_for_the_closed_form_only() {
         assert!(stdout.contains("h = 1.6667e-2 s"), "{integrator}: {stdout}");
         stdout.contains("within 2 % of a whole multiple of h_c")
     };
-    for closed_form in ["harmonic", "harmonic-gs", "harmonic-forced"] {
+    for closed_form in ["harmonic", "harmonic-gs"] {
         assert!(warns(closed_form), "{closed_form} is not warned");
     }
     for other in ["symplectic-euler", "implicit-euler", "theta-mg", "xpbd"] {

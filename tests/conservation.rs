@@ -25,12 +25,8 @@ fn random_network(rng: &mut Rng, integrator: Integrator) -> Simulation {
     for k in 0..60 {
         let a = k % n;
         let b = (a + 1 + (rng.next_f64() * (n - 1) as f64) as usize) % n;
-        // ζ in the under-damped, near-critical and over-damped regimes (paper: ζ < 0.7 only).
-        let zeta = if integrator == Integrator::HarmonicPaper {
-            rng.range(0.0, 0.6)
-        } else {
-            [0.1, 1.0, 3.0][k % 3]
-        };
+        // ζ in the under-damped, near-critical and over-damped regimes.
+        let zeta = [0.1, 1.0, 3.0][k % 3];
         springs += &format!(
             "(a: {a}, b: {b}, frequency: {}, damping_ratio: {zeta}),",
             rng.range(0.5, 3.0)

@@ -129,3 +129,50 @@ fn forces_on_the_gpu_are_gravity_where_uniform_and_the_cpu_where_not() {
     gpu.step().expect("steps");
     assert!(!gpu.schedule().has(StageKind::Forces));
 }
+
+/// The device's stage clock: where the adapter has timestamps inside compute passes, every
+/// frame on the device gives its integrate kernels' time, and its contact kernels' where the
+/// contacts run there; each stage's kernels fit in the frame's wall time. With the timers off,
+/// nothing is measured.
+#[test]
+fn the_device_times_each_stage_where_it_has_timestamps() {
+    let Some(ctx) = context() else { return };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    for (name, device_contacts) in [
+        ("hanging_cloth.ron", false),
+        ("drape_sphere.ron", true),
+        ("trampoline.ron", true),
+        ("cape.ron", false),
+    ] {
+        let built = Scene::load(root.join(name)).unwrap().build();
+        let config = SimConfig {
+            backend: Backend::Gpu,
+            ..built.config
+        };
+        let mut sim = Simulation::with_props(built.world, config, built.props).unwrap();
+        let clock = sim.gpu_solver().expect("on the GPU").has_clock();
+        println!("{}: stage clock {clock}", ctx.describe());
+        for _ in 0..3 {
+            let stats = *sim.step().unwrap();
+            let Some(kernels) = stats.device_stages else {
+                assert!(!clock, "{name}: the clock measured nothing: {stats:?}");
+                continue;
+            };
+            assert!(clock);
+            let integrate = kernels[StageKind::Integrate];
+            let contacts = kernels[StageKind::Contacts];
+            println!(
+                "{name}: integrate {integrate:?}, contacts {contacts:?} of {:?}",
+                stats.total()
+            );
+            assert!(!integrate.is_zero(), "{name}: {kernels:?}");
+            assert_eq!(!contacts.is_zero(), device_contacts, "{name}: {kernels:?}");
+            assert!(
+                kernels.total() <= stats.total(),
+                "{name}: {kernels:?} in {stats:?}"
+            );
+        }
+        sim.set_timers(false);
+        assert_eq!(sim.step().unwrap().device_stages, None, "{name}");
+    }
+}

@@ -495,3 +495,25 @@ fn check_refuses_what_run_refuses_before_its_first_frame_in_the_same_words() {
         assert!(c.contains(&format!("{p}: the scene's seconds")), "{c}");
     }
 }
+
+#[test]
+fn a_scene_naming_a_research_integrator_is_pointed_to_the_lab() {
+    let path = scene_file(
+        "research.ron",
+        "Scene(dt: 0.01, integrator: \"harmonic-sgs\",
+           particles: [(position: (0.0, 0.0, 0.0), mass: 0.0), (position: (1.0, 0.0, 0.0), mass: 1.0)],
+           springs: [(a: 0, b: 1, stiffness: 100.0)])",
+    );
+    let path = path.to_str().unwrap();
+    for command in ["check", "run"] {
+        refused(
+            &[command, path],
+            &[
+                "research.ron",
+                "integrator",
+                "`harmonic-sgs` is a research variant",
+                "harmonic-lab bench --integrators harmonic-sgs",
+            ],
+        );
+    }
+}

@@ -53,7 +53,6 @@ fn stepping_allocates_nothing() {
         (Integrator::Harmonic, true),
         (Integrator::SymplecticEuler, false),
         (Integrator::ExplicitEuler, false),
-        (Integrator::Rk4, false),
     ] {
         // 24×24 (3,218 springs): every pass on the calling thread.
         let serial = allocations_per_frame(24, integrator, exact);

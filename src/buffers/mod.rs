@@ -381,6 +381,23 @@ impl Packed {
         }
     }
 
+    /// Puts back the state the World holds, which the last scatter or edit wrote: every
+    /// particle's position, a free particle's velocity, a pinned one at rest (as gathered).
+    /// Entity by entity, in packed order, as [`Self::scatter`] writes it: bit for bit the
+    /// state the frame started from, with no copy of it kept.
+    pub fn reload_state(&mut self, world: &World) {
+        for (i, &e) in self.topology.entities.iter().enumerate() {
+            if let Ok(p) = world.get::<&Particle>(e) {
+                self.x[i] = p.position;
+                self.v[i] = if self.inv_mass[i] != 0.0 {
+                    p.velocity
+                } else {
+                    DVec3::ZERO
+                };
+            }
+        }
+    }
+
     /// The packed index of a particle entity, if it was packed.
     pub fn index_of(&self, e: Entity) -> Option<usize> {
         self.topology.index_of(e)

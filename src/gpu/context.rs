@@ -77,6 +77,8 @@ impl GpuContext {
         }
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("harmonic"),
+            // The stage clock's timestamps, where the adapter has them.
+            required_features: adapter.features() & super::clock::FEATURES,
             required_limits: limits.clone(),
             ..Default::default()
         }))

@@ -26,8 +26,9 @@ use wgpu::util::DeviceExt;
 use crate::buffers::Packed;
 use crate::error::GpuError;
 use crate::integrate::harmonic::Linear;
-use crate::integrate::{grid, Integrator, SGS_SWEEPS};
+use crate::integrate::{grid, Integrator};
 
+pub mod clock;
 mod context;
 mod layout;
 mod pipelines;

@@ -8,8 +8,8 @@ pub enum Kernel {
     /// `spring_pass`, `grid_pass` per cloth grid kept whole, then `particle_pass` (harmonic,
     /// symplectic and explicit Euler).
     Jacobi,
-    /// `add_gravity`, `sweeps` colour sweeps alternating direction, `drift`.
-    GaussSeidel { sweeps: u32 },
+    /// `add_gravity`, one sweep over the colours, `drift`.
+    GaussSeidel,
 }
 
 impl Kernel {
@@ -20,10 +20,7 @@ impl Kernel {
             Integrator::Harmonic | Integrator::SymplecticEuler | Integrator::ExplicitEuler => {
                 Some(Kernel::Jacobi)
             }
-            Integrator::HarmonicGs => Some(Kernel::GaussSeidel { sweeps: 1 }),
-            Integrator::HarmonicSgs => Some(Kernel::GaussSeidel {
-                sweeps: SGS_SWEEPS as u32,
-            }),
+            Integrator::HarmonicGs => Some(Kernel::GaussSeidel),
             _ => None,
         }
     }

@@ -1,6 +1,7 @@
 //! The GPU step: substeps encoded into one submit, the state read back on request.
 
 use super::*;
+use crate::schedule::StageKind;
 
 /// The GPU step over one scene.
 pub struct GpuSolver {
@@ -27,6 +28,8 @@ pub struct GpuSolver {
     pub(super) submits: u64,
     /// Host scratch for the external accelerations ([`Self::set_accel`]).
     pub(super) host_accel: Vec<[f32; 4]>,
+    /// The stage clock, where the device has timestamps inside passes.
+    pub(super) clock: Option<clock::Clock>,
 }
 
 impl GpuSolver {
@@ -79,6 +82,7 @@ impl GpuSolver {
             });
             (module, layout, pipeline_layout)
         })?;
+        let clock = clock::Clock::new(&ctx);
         Ok(Self {
             ctx,
             module,
@@ -96,6 +100,7 @@ impl GpuSolver {
             contacts: None,
             submits: 0,
             host_accel: Vec::new(),
+            clock,
         })
     }
 
@@ -200,6 +205,26 @@ impl GpuSolver {
         self.submits
     }
 
+    /// Whether the device has the stage clock (timestamps inside passes: [`clock::FEATURES`]).
+    pub fn has_clock(&self) -> bool {
+        self.clock.is_some()
+    }
+
+    /// Turns the stage clock's timestamps on or off (off by default; a simulation turns it on
+    /// with its timers, [`crate::Simulation::set_timers`]).
+    pub fn set_clock(&mut self, on: bool) {
+        if let Some(c) = &mut self.clock {
+            c.on = on;
+        }
+    }
+
+    /// Each stage's kernel time since the last call, as the timestamps read back with the
+    /// state measured it; `None` without the clock, with it off, or when a submit found no
+    /// room for its timestamps ([`clock::CAPACITY`]).
+    pub fn take_clock(&mut self) -> Option<crate::schedule::StageTimes> {
+        self.clock.as_mut().and_then(|c| c.take())
+    }
+
     /// Encodes `substeps` substeps into one submit. Nothing is read back.
     pub fn run(&mut self, substeps: u32) -> Result<(), GpuError> {
         self.run_slots(0, substeps)
@@ -217,6 +242,15 @@ impl GpuSolver {
         }
         let kernel = self.kernel;
         let ctx = &self.ctx;
+        // A submit's start, then the end of each stage of each substep.
+        let per_substep = 1 + u32::from(contacts.is_some());
+        let mut clock = self.clock.as_mut();
+        if !clock
+            .as_deref_mut()
+            .is_some_and(|c| c.admits(1 + substeps * per_substep))
+        {
+            clock = None;
+        }
         ctx.scoped("step", || {
             let mut encoder = ctx
                 .device
@@ -228,6 +262,9 @@ impl GpuSolver {
                     label: Some("substeps"),
                     timestamp_writes: None,
                 });
+                if let Some(c) = clock.as_deref_mut() {
+                    c.mark(&mut pass, None);
+                }
                 for s in 0..substeps {
                     pass.set_bind_group(0, &b.bind_group, &[0]);
                     match kernel {
@@ -246,26 +283,28 @@ impl GpuSolver {
                             pass.set_pipeline(&p.particle_pass);
                             dispatch(&mut pass, b.particles);
                         }
-                        Kernel::GaussSeidel { sweeps } => {
+                        Kernel::GaussSeidel => {
                             pass.set_pipeline(&p.add_gravity);
                             dispatch(&mut pass, b.particles);
                             pass.set_pipeline(&p.sweep_colour);
-                            for sweep in 0..sweeps {
-                                let n = b.colours.len();
-                                for i in 0..n {
-                                    let c = if sweep % 2 == 1 { n - 1 - i } else { i };
-                                    let offset = c as u32 * b.colour_stride;
-                                    pass.set_bind_group(0, &b.bind_group, &[offset]);
-                                    dispatch(&mut pass, b.colours[c].1);
-                                }
+                            for (c, &(_, count)) in b.colours.iter().enumerate() {
+                                let offset = c as u32 * b.colour_stride;
+                                pass.set_bind_group(0, &b.bind_group, &[offset]);
+                                dispatch(&mut pass, count);
                             }
                             pass.set_bind_group(0, &b.bind_group, &[0]);
                             pass.set_pipeline(&p.drift);
                             dispatch(&mut pass, b.particles);
                         }
                     }
+                    if let Some(c) = clock.as_deref_mut() {
+                        c.mark(&mut pass, Some(StageKind::Integrate));
+                    }
                     if let Some(c) = contacts {
                         c.encode(&mut pass, first + s);
+                        if let Some(c) = clock.as_deref_mut() {
+                            c.mark(&mut pass, Some(StageKind::Contacts));
+                        }
                     }
                 }
             }
@@ -286,6 +325,7 @@ impl GpuSolver {
             return Ok(());
         }
         let total = pos_bytes + vel_bytes;
+        let clock = self.clock.as_ref();
         read_staging(
             &self.ctx,
             "read back",
@@ -294,6 +334,9 @@ impl GpuSolver {
             |encoder| {
                 encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
                 encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
+                if let Some(c) = clock {
+                    c.resolve(encoder);
+                }
             },
             |bytes| {
                 let pos: &[Position] = bytemuck::cast_slice(&bytes[..pos_bytes as usize]);
@@ -305,7 +348,11 @@ impl GpuSolver {
                     *v = DVec3::new(w[0].into(), w[1].into(), w[2].into());
                 }
             },
-        )
+        )?;
+        match &mut self.clock {
+            Some(c) => c.collect(&self.ctx),
+            None => Ok(()),
+        }
     }
 
     /// Uploads positions and velocities from `packed` (after the CPU changed them: contacts),
@@ -363,9 +410,9 @@ impl GpuSolver {
                 let grid_pass = g * (pos + 16 + 16 + 16);
                 spring_pass + grid_pass + particle_pass
             }
-            Kernel::GaussSeidel { sweeps } => {
+            Kernel::GaussSeidel => {
                 let sweep = m * (8 + 16) + n * (pos + 2 * 16);
-                n * 2 * 16 + sweeps as u64 * sweep + n * (2 * pos + 16)
+                n * 2 * 16 + sweep + n * (2 * pos + 16)
             }
         }
     }

@@ -40,7 +40,7 @@ impl<'a, T> Disjoint<'a, T> {
 /// A spring as the sweep reads it, copied in colour order at prepare: each colour is then one
 /// sequential stream instead of a gather through the colouring's index list.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct SweepSpring {
+pub struct SweepSpring {
     spring: PackedSpring,
     lin: Linear,
     /// Index in `Packed::springs` (the forcing is stored by it).
@@ -48,7 +48,7 @@ pub(super) struct SweepSpring {
 }
 
 /// The springs of `packed`'s colouring, colour after colour, with their coefficients.
-pub(super) fn order(packed: &Packed, lin: &[Linear], out: &mut Vec<SweepSpring>) {
+pub fn order(packed: &Packed, lin: &[Linear], out: &mut Vec<SweepSpring>) {
     out.clear();
     out.extend(packed.colouring.springs.iter().map(|&k| SweepSpring {
         spring: packed.springs[k as usize],
@@ -59,13 +59,10 @@ pub(super) fn order(packed: &Packed, lin: &[Linear], out: &mut Vec<SweepSpring>)
 
 /// One sweep over all colours: `φ = p δ + q δ̇ + s a` per spring (with `a` the frozen relative
 /// acceleration from everything else when `forcing` is given), applied to both ends at once.
-/// `springs` is [`order`]'s output for `packed`.
-pub(super) fn sweep(
-    packed: &mut Packed,
-    springs: &[SweepSpring],
-    forcing: Option<&[f64]>,
-    reverse: bool,
-) {
+/// `springs` is [`order`]'s output for `packed`. `harmonic-gs` sweeps forward with no forcing;
+/// the lab's research variants pass a forcing (`harmonic-forced-gs`) or sweep the colours in
+/// reverse (`harmonic-sgs`).
+pub fn sweep(packed: &mut Packed, springs: &[SweepSpring], forcing: Option<&[f64]>, reverse: bool) {
     let Packed {
         x, v, colouring, ..
     } = packed;
@@ -94,7 +91,7 @@ pub(super) fn sweep(
 }
 
 /// `v += g h` on free particles (`g` the external acceleration).
-pub(super) fn add_gravity(packed: &mut Packed, g: super::External<'_>, h: f64) {
+pub fn add_gravity(packed: &mut Packed, g: super::External<'_>, h: f64) {
     let Packed { v, inv_mass, .. } = packed;
     par::each(v, |i, vi| {
         if inv_mass[i] != 0.0 {
@@ -104,7 +101,7 @@ pub(super) fn add_gravity(packed: &mut Packed, g: super::External<'_>, h: f64) {
 }
 
 /// `x += h v` on free particles.
-pub(super) fn drift(packed: &mut Packed, h: f64) {
+pub fn drift(packed: &mut Packed, h: f64) {
     let Packed { x, v, inv_mass, .. } = packed;
     par::each(x, |i, xi| {
         if inv_mass[i] != 0.0 {

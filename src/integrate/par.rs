@@ -9,7 +9,7 @@ pub(crate) const PAR_MIN: usize = 4096;
 pub(crate) const PAR_CHUNK: usize = 1024;
 
 /// `body(i, &mut items[i])` for every element.
-pub(crate) fn each<T: Send>(items: &mut [T], body: impl Fn(usize, &mut T) + Sync + Send) {
+pub fn each<T: Send>(items: &mut [T], body: impl Fn(usize, &mut T) + Sync + Send) {
     if items.len() < PAR_MIN {
         items.iter_mut().enumerate().for_each(|(i, t)| body(i, t));
     } else {
@@ -22,7 +22,7 @@ pub(crate) fn each<T: Send>(items: &mut [T], body: impl Fn(usize, &mut T) + Sync
 }
 
 /// `body(i, &mut a[i], &mut b[i])` for every element of two equally long slices.
-pub(crate) fn each2<A: Send, B: Send>(
+pub fn each2<A: Send, B: Send>(
     a: &mut [A],
     b: &mut [B],
     body: impl Fn(usize, &mut A, &mut B) + Sync + Send,
@@ -43,7 +43,7 @@ pub(crate) fn each2<A: Send, B: Send>(
 }
 
 /// Whether `pred(&a[i], &b[i])` holds for any element (stops early).
-pub(crate) fn any2<A: Sync, B: Sync>(
+pub fn any2<A: Sync, B: Sync>(
     a: &[A],
     b: &[B],
     pred: impl Fn(&A, &B) -> bool + Sync + Send,
@@ -59,7 +59,7 @@ pub(crate) fn any2<A: Sync, B: Sync>(
 }
 
 /// `body(&items[i])` for every element (the element decides what it writes).
-pub(crate) fn each_of<T: Sync>(items: &[T], body: impl Fn(&T) + Sync + Send) {
+pub fn each_of<T: Sync>(items: &[T], body: impl Fn(&T) + Sync + Send) {
     if items.len() < PAR_MIN {
         items.iter().for_each(body);
     } else {

@@ -72,7 +72,7 @@ pub(crate) fn euler_move(
 }
 
 /// Pass 2: each particle in no grid gathers its springs' changes and moves.
-pub(super) fn particle_pass(
+pub fn particle_pass(
     packed: &mut Packed,
     sdv: &[DVec3],
     sdx: &[DVec3],
@@ -108,22 +108,7 @@ pub(super) fn particle_pass(
                     *xi += h * *vi + 0.5 * h * h * g + inc.sum(sdx, i);
                     *vi += dv + g * h;
                 }
-                Update::PaperAlgorithm1 => {
-                    *vi += h * dv + g * h;
-                    *xi += h * *vi;
-                }
             }
         });
     }
-}
-
-/// Accelerations from per-spring relative accelerations (RK4's derivative).
-pub(super) fn acceleration(packed: &Packed, sdv: &[DVec3], g: External<'_>, out: &mut [DVec3]) {
-    par::each(out, |i, a| {
-        *a = if packed.inv_mass[i] == 0.0 {
-            DVec3::ZERO
-        } else {
-            packed.incidence.sum(sdv, i) + g.at(i)
-        };
-    });
 }

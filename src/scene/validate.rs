@@ -150,11 +150,19 @@ impl Scene {
         }
         is.finite("gravity", self.gravity);
         if let Some(name) = &self.integrator {
-            if name.parse::<Integrator>().is_err() {
-                let known: Vec<_> = Integrator::ALL.iter().map(|i| i.name()).collect();
+            if crate::RESEARCH_INTEGRATORS.contains(&name.as_str()) {
                 is.push(
                     "integrator",
-                    format!("unknown `{name}` (known: {})", known.join(", ")),
+                    format!(
+                        "`{name}` is a research variant: it moved to the lab crate \
+                         (`harmonic-lab bench --integrators {name}`); a scene names one of: {}",
+                        known_integrators()
+                    ),
+                );
+            } else if name.parse::<Integrator>().is_err() {
+                is.push(
+                    "integrator",
+                    format!("unknown `{name}` (known: {})", known_integrators()),
                 );
             }
         }
@@ -552,4 +560,10 @@ impl Scene {
             }
         }
     }
+}
+
+/// The integrators' names as messages list them.
+fn known_integrators() -> String {
+    let known: Vec<_> = Integrator::ALL.iter().map(|i| i.name()).collect();
+    known.join(", ")
 }

@@ -18,6 +18,11 @@ pub struct StepStats {
     /// which run while the host waits for the state (or the contacts' impulses) to come back.
     /// Zero on the CPU.
     pub device: Duration,
+    /// On the GPU, each stage's kernel time on the device, from timestamps written between
+    /// the stages' kernels. `None` where not measured: on the CPU, with the timers off, on an
+    /// adapter without timestamps inside compute passes, or in a frame with more than
+    /// `gpu::clock::CAPACITY` of them.
+    pub device_stages: Option<StageTimes>,
     /// The energy audit: the dampers' pass after each substep (damped scenes only) and the
     /// energy at the frame's ends.
     pub audit_time: Duration,

@@ -59,9 +59,6 @@ pub(super) struct Controller {
     pub(super) motion: f64,
     /// Substep changes made so far (a frame taken again included).
     pub(super) changes: u32,
-    /// The start of a frame that may be taken again or is checked; between frames, the
-    /// motion check's scratch.
-    pub(super) start: (Vec<DVec3>, Vec<DVec3>),
     /// The motion check under way.
     pub(super) probe: super::motion::Probe,
 }
@@ -170,18 +167,6 @@ impl Simulation {
 }
 
 impl Controller {
-    /// Keeps the frame's start, for [`Self::rejects`] and the motion check.
-    pub(super) fn keep_start(&mut self, packed: &Packed) {
-        self.start.0.clone_from(&packed.x);
-        self.start.1.clone_from(&packed.v);
-    }
-
-    /// Puts the frame's start back.
-    pub(super) fn restore_start(&self, packed: &mut Packed) {
-        packed.x.copy_from_slice(&self.start.0);
-        packed.v.copy_from_slice(&self.start.1);
-    }
-
     /// Whether a frame taken at `substeps` is rejected and taken again at the substeps
     /// returned: its books would leave the cumulative residual at `after`, more than half
     /// the tolerance `tol` (J) above its lowest since the last change, and the substeps may

@@ -3,10 +3,11 @@
 //! compared; for a first-order step the frame's own error is about twice their difference
 //! (step doubling). The second run is spread over the `PROBE_FRAMES` (8) frames that follow, a
 //! quarter of a frame's work after each, so no frame pays for it whole (it was 3× a frame's
-//! work on the check frame); its verdict comes 8 frames after the frame it measured. Its state waits between frames in f32 (24 B per particle, and the
-//! check frame's end positions, 12 B), its half-steps in the frame's buffers, swapped in; the
-//! f32 rounding (10⁻⁷ of the positions) is far below the error it measures (10⁻³ of the
-//! scene's size). Its own solver (band scratch, a few bytes per particle) keeps the frame's
+//! work on the check frame); its verdict comes 8 frames after the frame it measured. Its state waits between frames in
+//! f32 (24 B per particle, and the check frame's end positions, 12 B); its half-steps run in the
+//! frame's buffers, and the frame's state comes back from the World after them (what the
+//! frame's scatter wrote, bit for bit). The f32 rounding (10⁻⁷ of the positions) is far below
+//! the error it measures (10⁻³ of the scene's size). Its own solver (band scratch, a few bytes per particle) keeps the frame's
 //! from being prepared twice a frame.
 
 use super::accuracy::CHECK_EVERY;
@@ -35,6 +36,12 @@ pub(super) struct Probe {
 }
 
 impl Probe {
+    /// Keeps the check frame's start, where the second run starts from.
+    pub(super) fn keep_start(&mut self, packed: &Packed) {
+        store(&mut self.x, &packed.x);
+        store(&mut self.v, &packed.v);
+    }
+
     /// Drops a check under way, and its solver: the buffers, or the integrator, changed.
     pub(super) fn abandon(&mut self) {
         self.left = 0;
@@ -67,14 +74,11 @@ impl Simulation {
             && !self.packed.x.is_empty()
     }
 
-    /// After a check frame of `substeps` (its start kept by `keep_start`): the second run
-    /// starts from there at half the step.
+    /// After a check frame of `substeps` (its start kept by [`Probe::keep_start`]): the
+    /// second run starts from there at half the step.
     pub(super) fn begin_probe(&mut self, substeps: u32) {
-        let c = &mut self.controller;
-        let p = &mut c.probe;
+        let p = &mut self.controller.probe;
         store(&mut p.end, &self.packed.x);
-        store(&mut p.x, &c.start.0);
-        store(&mut p.v, &c.start.1);
         p.substeps = substeps;
         p.left = 2 * substeps;
         p.share = p.left.div_ceil(PROBE_FRAMES);
@@ -88,16 +92,11 @@ impl Simulation {
         if c.probe.left == 0 {
             return Ok(None);
         }
-        let n = self.packed.x.len();
         let size = c.size();
-        let (pr, start, p) = (&mut c.probe, &mut c.start, &mut self.packed);
-        // The frame's state waits in the start's buffers while the check's runs.
-        start.0.resize(n, DVec3::ZERO);
-        start.1.resize(n, DVec3::ZERO);
-        load(&mut start.0, &pr.x);
-        load(&mut start.1, &pr.v);
-        std::mem::swap(&mut p.x, &mut start.0);
-        std::mem::swap(&mut p.v, &mut start.1);
+        let (pr, p) = (&mut c.probe, &mut self.packed);
+        // The check's run in the frame's buffers; the frame's state is in the World.
+        load(&mut p.x, &pr.x);
+        load(&mut p.v, &pr.v);
         let steps = pr.share.min(pr.left);
         let config = &self.config;
         let solver = pr.solver.get_or_insert_with(|| {
@@ -128,8 +127,7 @@ impl Simulation {
             store(&mut pr.x, &p.x);
             store(&mut pr.v, &p.v);
         }
-        std::mem::swap(&mut p.x, &mut start.0);
-        std::mem::swap(&mut p.v, &mut start.1);
+        p.reload_state(&self.world);
         result.map(|()| done.then_some(pr.substeps))
     }
 }

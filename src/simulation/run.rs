@@ -34,6 +34,8 @@ pub(super) struct Run<'a> {
     pub(super) audit_time: Duration,
     /// The host's waits for the device's work (the state or the contacts' partials back).
     pub(super) device_time: Duration,
+    /// The device's kernel time per stage, from its stage clock.
+    pub(super) device_stages: Option<StageTimes>,
     /// The last lap of the stage clock.
     pub(super) lap: Instant,
     /// Whether the stages are timed ([`Simulation::set_timers`]): off, no clock is read.
@@ -89,6 +91,10 @@ impl Run<'_> {
         if self.timed {
             self.lap = Instant::now();
         }
+        #[cfg(feature = "gpu")]
+        if let Some(d) = self.device.as_mut() {
+            d.gpu.set_clock(self.timed);
+        }
         let mut k = 0;
         while k < substeps {
             let n = per_submit.min(substeps - k);
@@ -109,6 +115,10 @@ impl Run<'_> {
         if self.device.as_ref().is_some_and(|d| d.device_newer) {
             self.state_to_host()?;
             self.quarantine();
+        }
+        #[cfg(feature = "gpu")]
+        if let Some(d) = self.device.as_mut() {
+            self.device_stages = d.gpu.take_clock();
         }
         Ok(())
     }

@@ -126,8 +126,10 @@ impl Simulation {
             && !self.config.step_budget.is_finite()
             && coupling.is_none()
             && !on_device;
-        if retry || probing {
-            self.controller.keep_start(&self.packed);
+        // A frame taken again starts from the World, which holds the frame's start until its
+        // end's scatter; the motion check keeps its own start, in f32.
+        if probing {
+            self.controller.probe.keep_start(&self.packed);
         }
         let mut run = run::Run {
             schedule: &self.schedule,
@@ -144,6 +146,7 @@ impl Simulation {
             times,
             audit_time: open_time,
             device_time: Duration::ZERO,
+            device_stages: None,
             lap: t1,
             timed: self.timers,
         };
@@ -174,7 +177,7 @@ impl Simulation {
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
                     break e;
                 };
-                controller.restore_start(run.packed);
+                run.packed.reload_state(run.world);
                 run.auditor.frame.damping = damping;
                 run.auditor.frame.forces = work;
                 *substeps_out = more;
@@ -194,7 +197,7 @@ impl Simulation {
             frame()?
         };
         let (times, audit_time) = (run.times, run.audit_time);
-        let device_time = run.device_time;
+        let device_time = (run.device_time, run.device_stages);
         self.config.substeps = substeps;
         self.finish_frame(
             t0,
@@ -242,7 +245,11 @@ impl Simulation {
         t0: Instant,
         t1: Instant,
         gathered: bool,
-        (times, audit_time, device): (StageTimes, Duration, Duration),
+        (times, audit_time, (device, device_stages)): (
+            StageTimes,
+            Duration,
+            (Duration, Option<StageTimes>),
+        ),
         beyond: bool,
         end: f64,
     ) -> Result<&StepStats, SimError> {
@@ -260,6 +267,7 @@ impl Simulation {
             gather: t1 - t0,
             stages: times,
             device,
+            device_stages,
             audit_time,
             scatter: t3 - t2,
             gathered,

@@ -6,7 +6,8 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use harmonic::glam::DVec3;
 use harmonic::internals::buffers::Packed;
-use harmonic::internals::integrate::{Integrator, Solver};
+use harmonic::Integrator;
+use harmonic_lab::research::{Method, Stepper};
 
 fn substep(c: &mut Criterion) {
     let scene = harmonic::internals::hanging_cloth(128);
@@ -14,13 +15,13 @@ fn substep(c: &mut Criterion) {
     let mut group = c.benchmark_group("substep/cloth128");
     group.throughput(Throughput::Elements(packed.spring_count() as u64));
     for integrator in [
-        Integrator::Harmonic,
-        Integrator::SymplecticEuler,
-        Integrator::ExplicitEuler,
-        Integrator::HarmonicPaper,
+        Method::Engine(Integrator::Harmonic),
+        Method::Engine(Integrator::SymplecticEuler),
+        Method::Engine(Integrator::ExplicitEuler),
+        Method::HARMONIC_PAPER,
     ] {
         let mut p = packed.clone();
-        let mut solver = Solver::new(integrator, false, DVec3::new(0.0, -9.81, 0.0));
+        let mut solver = Stepper::new(integrator, false, DVec3::new(0.0, -9.81, 0.0));
         solver.prepare(&p, scene.dt).unwrap();
         group.bench_function(integrator.name(), |b| {
             b.iter(|| solver.substep(&mut p, scene.dt).unwrap())

@@ -20,6 +20,7 @@ pub mod frame_time;
 #[cfg(feature = "gpu")]
 pub mod gpu_bench;
 pub mod peer;
+pub mod research;
 pub mod stability;
 pub mod statics;
 pub mod throughput;

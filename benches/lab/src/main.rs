@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use clap::{Parser, Subcommand};
 use harmonic::{Integrator, Scene, Simulation};
+use harmonic_lab::research::Method;
 use harmonic_lab::{stability, throughput};
 
 #[derive(Parser)]
@@ -387,17 +388,14 @@ fn bench_report(
     Ok(())
 }
 
-fn parse_integrators(names: &[String]) -> Result<Vec<Integrator>, String> {
+fn parse_integrators(names: &[String]) -> Result<Vec<Method>, String> {
     if names.is_empty() {
-        return Ok(Integrator::ALL
+        return Ok(Method::ALL
             .into_iter()
-            .filter(|i| *i != Integrator::Rk4)
+            .filter(|&m| m != Method::RK4)
             .collect());
     }
-    names
-        .iter()
-        .map(|n| n.parse::<Integrator>().map_err(|e| e.to_string()))
-        .collect()
+    names.iter().map(|n| n.parse::<Method>()).collect()
 }
 
 /// `harmonic-lab drape-peer`: the scene's first cloth on its ball, ours against rapier's.

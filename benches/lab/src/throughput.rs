@@ -8,13 +8,14 @@ use std::time::Instant;
 
 use harmonic::glam::DVec3;
 
+use crate::research::{Method, Stepper};
 use harmonic::internals::buffers::{GatherOptions, Packed};
 use harmonic::internals::hanging_cloths;
-use harmonic::internals::integrate::{Integrator, Solver};
+use harmonic::Integrator;
 
 /// One row of the bench.
 pub struct Row {
-    pub integrator: Integrator,
+    pub integrator: Method,
     /// The cloth's springs expanded one by one, for an integrator that runs on the grid as
     /// the simulation does (a comparison row).
     pub one_by_one: bool,
@@ -30,7 +31,7 @@ pub fn measure(
     cloths: u32,
     substeps: u32,
     repeats: u32,
-    integrators: &[Integrator],
+    integrators: &[Method],
 ) -> (usize, Vec<Row>) {
     let scene = hanging_cloths(n, cloths);
     let world = scene.build().world;
@@ -45,7 +46,7 @@ pub fn measure(
     let h = scene.dt;
     let g = DVec3::from(scene.gravity);
     let m = packed.spring_count();
-    let cases: Vec<(Integrator, bool)> = integrators
+    let cases: Vec<(Method, bool)> = integrators
         .iter()
         .flat_map(|&i| {
             let one_by_one = i.runs_on_grids(false).then_some((i, true));
@@ -53,10 +54,10 @@ pub fn measure(
         })
         .collect();
     let mut samples = vec![Vec::new(); cases.len()];
-    let mut runs: Vec<(Packed, Solver)> = cases
+    let mut runs: Vec<(Packed, Stepper)> = cases
         .iter()
         .map(|&(i, one_by_one)| {
-            let mut s = Solver::new(i, false, g);
+            let mut s = Stepper::new(i, false, g);
             let mut p = if i.runs_on_grids(false) && !one_by_one {
                 grid.clone()
             } else {
@@ -94,18 +95,12 @@ pub fn measure(
 }
 
 /// The bench as a Markdown table.
-pub fn report(
-    n: u32,
-    cloths: u32,
-    substeps: u32,
-    repeats: u32,
-    integrators: &[Integrator],
-) -> String {
+pub fn report(n: u32, cloths: u32, substeps: u32, repeats: u32, integrators: &[Method]) -> String {
     let (m, rows) = measure(n, cloths, substeps, repeats, integrators);
     let threads = rayon::current_num_threads();
     let reference = rows
         .iter()
-        .find(|r| r.integrator == Integrator::SymplecticEuler && !r.one_by_one)
+        .find(|r| r.integrator == Method::Engine(Integrator::SymplecticEuler) && !r.one_by_one)
         .map(|r| r.rate);
     let mut out = String::new();
     let _ = writeln!(

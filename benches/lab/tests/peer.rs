@@ -3,9 +3,9 @@
 
 use harmonic::glam::DVec3;
 use harmonic::internals::buffers::Packed;
-use harmonic::internals::integrate::{Integrator, Solver};
 use harmonic_lab::accuracy::{rms, swinging_cloth};
 use harmonic_lab::peer::{grid_strain, run_cloth};
+use harmonic_lab::research::{Method, Stepper};
 
 const G: DVec3 = DVec3::new(0.0, -9.81, 0.0);
 
@@ -42,7 +42,7 @@ fn rapiers_cloth_converges_to_our_motion() {
     let steps = 4000;
     let h = t / steps as f64;
     let mut p = packed.clone();
-    let mut solver = Solver::new(Integrator::Rk4, false, G);
+    let mut solver = Stepper::new(Method::RK4, false, G);
     solver.prepare(&p, h).unwrap();
     for _ in 0..steps {
         solver.substep(&mut p, h).unwrap();

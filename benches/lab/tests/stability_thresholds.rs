@@ -3,9 +3,10 @@
 
 use harmonic::internals::buffers::Packed;
 use harmonic::Integrator;
+use harmonic_lab::research::Method;
 use harmonic_lab::stability::{self, GROWTH_TOL};
 
-fn stable(p: &Packed, integrator: Integrator, ratio: f64) -> bool {
+fn stable(p: &Packed, integrator: Method, ratio: f64) -> bool {
     let h = ratio * stability::h_crit(p);
     stability::growth_rate(p, integrator, false, h, 4000).is_some_and(|g| g <= 1.0 + GROWTH_TOL)
 }
@@ -18,10 +19,13 @@ fn thresholds_match_the_numpy_study_within_ten_percent() {
     {
         let p = Packed::gather(&study.scene.build().world).unwrap();
         for (integrator, figure) in [
-            (Integrator::SymplecticEuler, study.symplectic_euler),
-            (Integrator::Harmonic, study.harmonic),
-            (Integrator::HarmonicForced, study.forced),
-            (Integrator::HarmonicGs, study.gauss_seidel),
+            (
+                Method::Engine(Integrator::SymplecticEuler),
+                study.symplectic_euler,
+            ),
+            (Method::Engine(Integrator::Harmonic), study.harmonic),
+            (Method::HARMONIC_FORCED, study.forced),
+            (Method::Engine(Integrator::HarmonicGs), study.gauss_seidel),
         ] {
             for (factor, expect) in [(0.5, true), (0.9, true), (1.1, false)] {
                 assert_eq!(

@@ -4,6 +4,7 @@
 use harmonic::glam::DVec3;
 use harmonic::internals::buffers::Packed;
 use harmonic::Integrator;
+use harmonic_lab::research::Method;
 use harmonic_lab::stability::{self, Start};
 use harmonic_lab::statics;
 
@@ -40,7 +41,7 @@ fn equilibrium_start_stays_put_with_rk4() {
     let hc = stability::h_crit(&p);
     let o = stability::run(
         &p,
-        Integrator::Rk4,
+        Method::RK4,
         DVec3::from(scene.gravity),
         0.2 * hc,
         1.0,
@@ -59,7 +60,8 @@ fn equilibrium_start_stays_put_with_rk4() {
 fn single_spring_thresholds_match_the_oscillator_bounds() {
     // Symplectic Euler on an undamped oscillator is stable iff ω h ≤ 2: h/h_c ≤ 2/π.
     let p = pack(&stability::pair(1.0, 0.0, false, Start::Equilibrium).0);
-    let se = stability::threshold(&p, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
+    let se = stability::threshold(&p, Method::Engine(Integrator::SymplecticEuler), false, 2.0)
+        .expect("bounded");
     println!(
         "symplectic Euler: {se:.4} (exact {:.4})",
         2.0 / std::f64::consts::PI
@@ -67,16 +69,17 @@ fn single_spring_thresholds_match_the_oscillator_bounds() {
     assert!((se - 2.0 / std::f64::consts::PI).abs() < 0.01, "{se}");
     // Harmonic with exact displacement integrates an isolated spring exactly: never unstable.
     assert_eq!(
-        stability::threshold(&p, Integrator::Harmonic, true, 10.0),
+        stability::threshold(&p, Method::Engine(Integrator::Harmonic), true, 10.0),
         None
     );
     // Over-damped: the closed form is stable at any step (MATH: ∞), symplectic Euler is not.
     let p2 = pack(&stability::pair(1.0, 2.0, false, Start::Equilibrium).0);
     assert_eq!(
-        stability::threshold(&p2, Integrator::Harmonic, false, 10.0),
+        stability::threshold(&p2, Method::Engine(Integrator::Harmonic), false, 10.0),
         None
     );
-    let se2 = stability::threshold(&p2, Integrator::SymplecticEuler, false, 2.0).expect("bounded");
+    let se2 = stability::threshold(&p2, Method::Engine(Integrator::SymplecticEuler), false, 2.0)
+        .expect("bounded");
     println!("symplectic Euler at ζ = 2: {se2:.4}");
     // Exact bound: ωh < 2(√(ζ²+1) − ζ), i.e. h/h_c < 0.1502 at ζ = 2.
     let exact = 2.0 * (5.0f64.sqrt() - 2.0) / std::f64::consts::PI;
@@ -104,11 +107,11 @@ fn harmonic_single_spring_thresholds_match_their_closed_forms() {
     let one_impulse = 2.0 * lo / PI; // 0.5477
     let p = pack(&stability::pair(1.0, 0.0, false, Start::Equilibrium).0);
     for (integrator, exact) in [
-        (Integrator::Harmonic, one_impulse),
-        (Integrator::HarmonicGs, one_impulse),
-        (Integrator::HarmonicForced, one_impulse),
-        (Integrator::HarmonicForcedGs, one_impulse),
-        (Integrator::HarmonicSgs, 1.0),
+        (Method::Engine(Integrator::Harmonic), one_impulse),
+        (Method::Engine(Integrator::HarmonicGs), one_impulse),
+        (Method::HARMONIC_FORCED, one_impulse),
+        (Method::HARMONIC_FORCED_GS, one_impulse),
+        (Method::HARMONIC_SGS, 1.0),
     ] {
         let t = stability::threshold(&p, integrator, false, 2.0).expect("bounded");
         println!("{integrator}: {t:.4} (exact {exact:.4})");
@@ -126,8 +129,14 @@ fn implicit_euler_is_stable_at_every_step_on_the_threshold_systems() {
         let p = pack(&study.scene);
         let hc = stability::h_crit(&p);
         for ratio in [0.5, 1.0, 2.0, 4.0, 8.0625] {
-            let g = stability::growth_rate(&p, Integrator::ImplicitEuler, false, ratio * hc, 2000)
-                .expect("runs");
+            let g = stability::growth_rate(
+                &p,
+                Method::Engine(Integrator::ImplicitEuler),
+                false,
+                ratio * hc,
+                2000,
+            )
+            .expect("runs");
             assert!(
                 g <= 1.0 + stability::GROWTH_TOL,
                 "{} at {ratio} h_c: growth {g}",
@@ -146,7 +155,7 @@ fn relaxed_cloth_is_a_fixed_point() {
     let hc = stability::h_crit(&p);
     match stability::run(
         &p,
-        Integrator::Rk4,
+        Method::RK4,
         DVec3::from(scene.gravity),
         0.2 * hc,
         0.2,
@@ -176,8 +185,8 @@ fn forced_harmonic_keeps_statics_exact() {
         other => panic!("{integrator}: {other:?}"),
     };
     let (forced, plain) = (
-        ratio(Integrator::HarmonicForced),
-        ratio(Integrator::Harmonic),
+        ratio(Method::HARMONIC_FORCED),
+        ratio(Method::Engine(Integrator::Harmonic)),
     );
     println!("max strain / static strain at 0.3 h_c: forced {forced:.12}, harmonic {plain:.6}");
     assert!(
@@ -199,7 +208,7 @@ fn implicit_euler_stays_bounded_at_large_steps() {
     let h = 8.0625 * stability::h_crit(&p);
     match stability::run(
         &p,
-        Integrator::ImplicitEuler,
+        Method::Engine(Integrator::ImplicitEuler),
         DVec3::from(scene.gravity),
         h,
         10.0,
@@ -217,7 +226,7 @@ fn implicit_euler_stays_bounded_at_large_steps() {
     assert!(matches!(
         stability::run(
             &p,
-            Integrator::ImplicitEuler,
+            Method::Engine(Integrator::ImplicitEuler),
             DVec3::from(cloth.gravity),
             h,
             2.0,

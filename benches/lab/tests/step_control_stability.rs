@@ -1,8 +1,9 @@
 //! Automatic step control against the stability suite: the controller's step is stable (a
 //! perturbation about rest does not grow) at damping ratios between and beyond the measured ones.
 
-use harmonic::internals::{step_control, Packed};
+use harmonic::internals::Packed;
 use harmonic::prelude::*;
+use harmonic_lab::research::{self, Method};
 use harmonic_lab::stability;
 
 /// The controller's step at damping ratios between and beyond the measured ones: every
@@ -17,14 +18,14 @@ fn the_controllers_step_is_stable_at_any_damping() {
         s
     };
     let integrators = [
-        Integrator::SymplecticEuler,
-        Integrator::ExplicitEuler,
-        Integrator::Harmonic,
-        Integrator::HarmonicForced,
-        Integrator::HarmonicGs,
-        Integrator::HarmonicSgs,
-        Integrator::HarmonicForcedGs,
-        Integrator::Rk4,
+        Method::Engine(Integrator::SymplecticEuler),
+        Method::Engine(Integrator::ExplicitEuler),
+        Method::Engine(Integrator::Harmonic),
+        Method::HARMONIC_FORCED,
+        Method::Engine(Integrator::HarmonicGs),
+        Method::HARMONIC_SGS,
+        Method::HARMONIC_FORCED_GS,
+        Method::RK4,
     ];
     let mut failures = Vec::new();
     for zeta in [0.05, 0.25, 0.45, 0.55, 0.6, 0.7, 0.9, 1.2, 1.8, 3.0, 5.0] {
@@ -39,7 +40,7 @@ fn the_controllers_step_is_stable_at_any_damping() {
             let p = Packed::gather(&scene.build().world).unwrap();
             for integrator in integrators {
                 let dt = 1.0 / 60.0;
-                let choice = step_control::choose(&p, integrator, dt);
+                let choice = research::choose(&p, integrator, dt);
                 let h = dt / f64::from(choice.substeps);
                 let growth = stability::growth_rate(&p, integrator, false, h, 4000).unwrap();
                 if growth > 1.0 + stability::GROWTH_TOL {

@@ -331,13 +331,8 @@ fn run(args: RunArgs) -> Result<(), String> {
         args.scene.display()
     );
     say!(
-        "integrator: {}{}{}, dt {} s, {} substep(s), h = {:.4e} s",
+        "integrator: {}{}, dt {} s, {} substep(s), h = {:.4e} s",
         config.integrator,
-        if config.integrator.is_research() {
-            " (research)"
-        } else {
-            ""
-        },
         if config.exact_displacement {
             " (exact displacement)"
         } else {

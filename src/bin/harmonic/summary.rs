@@ -8,6 +8,9 @@ use harmonic::{Diagnostics, EnergyAudit, StageKind, StageTimes, StepStats};
 pub struct Times {
     stages: StageTimes,
     device: f64,
+    /// The device's kernel time per stage by its timestamps, and the frames without them.
+    device_stages: StageTimes,
+    untimed: u64,
     gather: f64,
     /// The energy audit's passes (s).
     pub audit: f64,
@@ -18,6 +21,10 @@ impl Times {
     pub fn add(&mut self, s: &StepStats) {
         self.stages += s.stages;
         self.device += s.device.as_secs_f64();
+        match s.device_stages {
+            Some(t) => self.device_stages += t,
+            None => self.untimed += 1,
+        }
         self.gather += s.gather.as_secs_f64();
         self.audit += s.audit_time.as_secs_f64();
         self.scatter += s.scatter.as_secs_f64();
@@ -42,7 +49,17 @@ impl Times {
             .map(|(k, t)| format!("{} {} %", k.name(), share(t.as_secs_f64())))
             .collect();
         if self.device > 0.0 {
-            parts.push(format!("device {} %", share(self.device)));
+            // The kernels by the device's timestamps, where every frame had them.
+            let kernels: Vec<String> = (self.device_stages.iter())
+                .filter(|(_, t)| !t.is_zero() && self.untimed == 0)
+                .map(|(k, t)| format!("{} {:.4} s", k.name(), t.as_secs_f64()))
+                .collect();
+            let by_stage = if kernels.is_empty() {
+                String::new()
+            } else {
+                format!(" (kernels by timestamp: {})", kernels.join(", "))
+            };
+            parts.push(format!("device {} %{by_stage}", share(self.device)));
         }
         for (name, t) in [
             ("audit", self.audit),

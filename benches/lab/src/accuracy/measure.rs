@@ -20,7 +20,7 @@ pub fn measure(
         })
         .collect();
     let contenders = selection.integrators();
-    let plan: Vec<(usize, Integrator, u64)> = cases
+    let plan: Vec<(usize, Method, u64)> = cases
         .iter()
         .enumerate()
         .flat_map(|(ci, case)| {

@@ -11,11 +11,12 @@ use std::time::Instant;
 
 use harmonic::glam::DVec3;
 
+use crate::research::{self, Method, Stepper};
 use crate::{stability, statics};
 use harmonic::internals::buffers::{GatherOptions, Packed};
-use harmonic::internals::integrate::{Integrator, Solver};
 use harmonic::internals::{metrics, step_control};
 use harmonic::scene::{Anchor, Cloth, Plane, Rope, Scene, SpringSpec};
+use harmonic::Integrator;
 
 mod measure;
 mod report;
@@ -139,16 +140,16 @@ pub const PEER: &str = "rapier-soft-body";
 /// it reaches 1 cm on the 128² cloth (128).
 pub const RAPIER_SUBSTEPS: [usize; 6] = [4, 8, 16, 32, 64, 128];
 
-pub const CONTENDERS: [Integrator; 9] = [
-    Integrator::Harmonic,
-    Integrator::HarmonicGs,
-    Integrator::HarmonicSgs,
-    Integrator::HarmonicForced,
-    Integrator::HarmonicForcedGs,
-    Integrator::SymplecticEuler,
-    Integrator::ImplicitEuler,
-    Integrator::ThetaMg,
-    Integrator::Xpbd,
+pub const CONTENDERS: [Method; 9] = [
+    Method::Engine(Integrator::Harmonic),
+    Method::Engine(Integrator::HarmonicGs),
+    Method::HARMONIC_SGS,
+    Method::HARMONIC_FORCED,
+    Method::HARMONIC_FORCED_GS,
+    Method::Engine(Integrator::SymplecticEuler),
+    Method::Engine(Integrator::ImplicitEuler),
+    Method::Engine(Integrator::ThetaMg),
+    Method::Engine(Integrator::Xpbd),
 ];
 
 /// One measured run.
@@ -182,20 +183,21 @@ pub type Outcome = (Vec<DVec3>, f64, f64, (f64, f64));
 /// and the energy audit's books (booked as the engine books them, every 8th step a "frame").
 pub fn simulate(
     packed: &Packed,
-    integrator: Integrator,
+    integrator: impl Into<Method>,
     g: DVec3,
     steps: u64,
     e_ref: f64,
 ) -> Option<Outcome> {
-    use harmonic::internals::audit::{Auditor, DamperLaw};
+    let integrator = integrator.into();
+    use harmonic::internals::audit::Auditor;
     let h = T / steps as f64;
     let mut p = packed.clone();
-    let mut solver = Solver::new(integrator, false, g);
+    let mut solver = Stepper::new(integrator, false, g);
     solver.prepare(&p, h).ok()?;
     let e0 = metrics::energy(&p, g);
     let mut books = Auditor::default();
     books.prepare(&p, solver.grid_audits());
-    let law = DamperLaw::of(integrator);
+    let law = integrator.damper_law();
     let start = books.energy(&p, g);
     books.begin_frame(start, e_ref);
     let mut max_strain = metrics::max_strain(&p);
@@ -227,12 +229,12 @@ pub fn simulate(
 }
 
 /// Median wall time of `repeats` bare runs (no diagnostics).
-fn time_runs(packed: &Packed, integrator: Integrator, g: DVec3, steps: u64, repeats: u32) -> f64 {
+fn time_runs(packed: &Packed, integrator: Method, g: DVec3, steps: u64, repeats: u32) -> f64 {
     let h = T / steps as f64;
     let mut samples: Vec<f64> = (0..repeats.max(1))
         .map(|_| {
             let mut p = packed.clone();
-            let mut solver = Solver::new(integrator, false, g);
+            let mut solver = Stepper::new(integrator, false, g);
             let _ = solver.prepare(&p, h);
             let t = Instant::now();
             for _ in 0..steps {
@@ -261,7 +263,7 @@ struct Runner<'a> {
 
 impl Runner<'_> {
     /// The buffers `integrator` runs on.
-    fn on(&self, integrator: Integrator) -> &Packed {
+    fn on(&self, integrator: Method) -> &Packed {
         if integrator.runs_on_grids(false) {
             self.grid
         } else {
@@ -270,13 +272,13 @@ impl Runner<'_> {
     }
 
     /// Times a stable run by `repeats` bare runs.
-    fn time(&self, row: &mut Row, integrator: Integrator, repeats: u32) {
+    fn time(&self, row: &mut Row, integrator: Method, repeats: u32) {
         row.wall = time_runs(self.on(integrator), integrator, self.g, row.steps, repeats);
     }
 
     /// One run at `steps` per simulated second; timed by `repeats` bare runs (none: untimed)
     /// when stable.
-    fn run(&self, integrator: Integrator, steps: u64, repeats: u32) -> Row {
+    fn run(&self, integrator: Method, steps: u64, repeats: u32) -> Row {
         let outcome = simulate(self.on(integrator), integrator, self.g, steps, self.e_ref);
         let (rms_error, max_strain, energy_drift, (residual, peak_residual), stable) = match outcome
         {
@@ -312,14 +314,12 @@ pub use harmonic::internals::metrics::rms;
 /// Scenes with more springs than this get a shorter ladder (each run is seconds long).
 const LARGE: usize = 20_000;
 
-fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
-    let c = step_control::choose(packed, integrator, T);
+fn ladder(packed: &Packed, integrator: Method) -> Vec<u64> {
+    let c = research::choose(packed, integrator, T);
     let large = packed.spring_count() > LARGE;
     // An integrator without a stability limit (XPBD's bound is for accuracy) gets the wide
     // ladder, large steps included.
-    let limit = c
-        .limit
-        .filter(|_| step_control::stable_omega_h(integrator, 0.0).is_some());
+    let limit = c.limit.filter(|_| integrator.stable_omega_h(0.0).is_some());
     match (limit, large) {
         (Some(_), false) => {
             let n = c.substeps as u64;
@@ -330,8 +330,12 @@ fn ladder(packed: &Packed, integrator: Integrator) -> Vec<u64> {
             vec![(n / 2).max(1), n, 2 * n]
         }
         (None, false) => vec![30, 60, 120, 240, 480, 960, 1920, 3840],
-        (None, true) if integrator == Integrator::ImplicitEuler => vec![30, 60, 120, 240],
-        (None, true) if integrator == Integrator::ThetaMg => vec![30, 60, 120, 240, 480, 960],
+        (None, true) if integrator == Method::Engine(Integrator::ImplicitEuler) => {
+            vec![30, 60, 120, 240]
+        }
+        (None, true) if integrator == Method::Engine(Integrator::ThetaMg) => {
+            vec![30, 60, 120, 240, 480, 960]
+        }
         (None, true) => vec![60, 240, 960, 3840],
     }
 }
@@ -345,11 +349,11 @@ pub fn reference(packed: &Packed, g: DVec3) -> Result<(Vec<DVec3>, u64, f64, f64
     let n = reference_steps(packed)?;
     let unstable = || "the RK4 reference blew up (a scene too stiff for its steps)".to_string();
     // `n` steps; the reference itself takes 2n.
-    let a = simulate(packed, Integrator::Rk4, g, n, 1.0)
+    let a = simulate(packed, Method::RK4, g, n, 1.0)
         .ok_or_else(unstable)?
         .0;
     let (b, max_strain, _, _) =
-        simulate(packed, Integrator::Rk4, g, 2 * n, 1.0).ok_or_else(unstable)?;
+        simulate(packed, Method::RK4, g, 2 * n, 1.0).ok_or_else(unstable)?;
     let change = rms(&a, &b);
     Ok((b, 2 * n, change, max_strain))
 }
@@ -358,7 +362,7 @@ pub fn reference(packed: &Packed, g: DVec3) -> Result<(Vec<DVec3>, u64, f64, f64
 /// floor alone passes [`step_control::MAX_SUBSTEPS`].
 pub fn reference_steps(packed: &Packed) -> Result<u64, String> {
     let factor = if packed.spring_count() > LARGE { 2 } else { 4 };
-    let c = step_control::choose(packed, Integrator::Rk4, T);
+    let c = research::choose(packed, Method::RK4, T);
     if c.capped {
         return Err(format!(
             "the RK4 reference would need more than {} steps per simulated second \
@@ -391,7 +395,7 @@ pub struct Selection {
     /// Scene names (empty: all of [`cases`]; [`extra_cases`] run only when named).
     pub scenes: Vec<String>,
     /// Integrators (empty: all of [`CONTENDERS`], and rapier's cloth when built in).
-    pub integrators: Vec<Integrator>,
+    pub integrators: Vec<Method>,
     /// Step counts per simulated second instead of each integrator's ladder (empty: ladders).
     pub steps: Vec<u64>,
     /// Every spring's stiffness times this, damping ratios kept (None: the scenes as they are):
@@ -446,7 +450,7 @@ impl Selection {
         Ok(())
     }
 
-    fn integrators(&self) -> Vec<Integrator> {
+    fn integrators(&self) -> Vec<Method> {
         if self.integrators.is_empty() {
             CONTENDERS.to_vec()
         } else {

@@ -5,11 +5,12 @@ use std::fmt::Write;
 
 use harmonic::glam::DVec3;
 
+use crate::research::{Method, Stepper};
 use crate::statics;
 use harmonic::internals::buffers::Packed;
-use harmonic::internals::integrate::{Integrator, Solver};
 use harmonic::internals::metrics;
 use harmonic::scene::{Anchor, Cloth, ParticleDef, Plane, Rope, Scene, SpringDef, SpringSpec};
+use harmonic::Integrator;
 
 mod report;
 pub use report::*;
@@ -18,18 +19,18 @@ pub use report::*;
 pub const RATIOS: [f64; 8] = [0.25, 0.5, 1.0, 2.0, 2.0625, 4.0, 6.0625, 8.0625];
 
 /// Integrators the suite compares (RK4 is the reference, not a contender).
-pub const CONTENDERS: [Integrator; 11] = [
-    Integrator::SymplecticEuler,
-    Integrator::ExplicitEuler,
-    Integrator::Harmonic,
-    Integrator::HarmonicGs,
-    Integrator::HarmonicForced,
-    Integrator::HarmonicForcedGs,
-    Integrator::HarmonicSgs,
-    Integrator::ImplicitEuler,
-    Integrator::ThetaMg,
-    Integrator::Xpbd,
-    Integrator::HarmonicPaper,
+pub const CONTENDERS: [Method; 11] = [
+    Method::Engine(Integrator::SymplecticEuler),
+    Method::Engine(Integrator::ExplicitEuler),
+    Method::Engine(Integrator::Harmonic),
+    Method::Engine(Integrator::HarmonicGs),
+    Method::HARMONIC_FORCED,
+    Method::HARMONIC_FORCED_GS,
+    Method::HARMONIC_SGS,
+    Method::Engine(Integrator::ImplicitEuler),
+    Method::Engine(Integrator::ThetaMg),
+    Method::Engine(Integrator::Xpbd),
+    Method::HARMONIC_PAPER,
 ];
 
 /// A run counts as blown up past this strain (1000 %).
@@ -222,14 +223,14 @@ pub enum Outcome {
 /// `energy_ref` (J).
 pub fn run(
     packed: &Packed,
-    integrator: Integrator,
+    integrator: impl Into<Method>,
     gravity: DVec3,
     h: f64,
     seconds: f64,
     energy_ref: f64,
 ) -> Outcome {
     let mut p = packed.clone();
-    let mut solver = Solver::new(integrator, false, gravity);
+    let mut solver = Stepper::new(integrator.into(), false, gravity);
     if solver.prepare(&p, h).is_err() {
         return Outcome::Undefined;
     }
@@ -285,12 +286,12 @@ fn energy_scale(packed: &Packed, gravity: DVec3) -> f64 {
 /// gives values within about `ln 2 / steps` of 1.
 pub fn growth_rate(
     packed: &Packed,
-    integrator: Integrator,
+    integrator: impl Into<Method>,
     exact: bool,
     h: f64,
     steps: usize,
 ) -> Option<f64> {
-    let mut solver = Solver::new(integrator, exact, DVec3::ZERO);
+    let mut solver = Stepper::new(integrator.into(), exact, DVec3::ZERO);
     solver.prepare(packed, h).ok()?;
     let w = h_crit(packed).recip() * std::f64::consts::PI;
     let eps = 1e-7
@@ -357,7 +358,13 @@ const GROWTH_STEPS: usize = 4000;
 
 /// Largest `h/h_c` below which every tested ratio is stable (scan in steps of 0.01 up to
 /// `max`, then bisect to 0.002), or `None` if stable up to `max`.
-pub fn threshold(packed: &Packed, integrator: Integrator, exact: bool, max: f64) -> Option<f64> {
+pub fn threshold(
+    packed: &Packed,
+    integrator: impl Into<Method>,
+    exact: bool,
+    max: f64,
+) -> Option<f64> {
+    let integrator = integrator.into();
     let hc = h_crit(packed);
     let stable = |r: f64| {
         growth_rate(packed, integrator, exact, r * hc, GROWTH_STEPS)

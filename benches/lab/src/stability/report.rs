@@ -50,18 +50,27 @@ pub fn report(opts: &Options) -> String {
         out,
         "Each cell: ours (numpy study's figure from MATH.md).\n"
     );
-    let columns: [(&str, Integrator, bool); 11] = [
-        ("symplectic Euler", Integrator::SymplecticEuler, false),
-        ("harmonic (Jacobi)", Integrator::Harmonic, false),
-        ("harmonic-forced", Integrator::HarmonicForced, false),
-        ("harmonic-gs", Integrator::HarmonicGs, false),
-        ("harmonic-forced-gs", Integrator::HarmonicForcedGs, false),
-        ("harmonic-sgs", Integrator::HarmonicSgs, false),
-        ("harmonic, exact displacement", Integrator::Harmonic, true),
-        ("explicit Euler", Integrator::ExplicitEuler, false),
-        ("implicit-euler", Integrator::ImplicitEuler, false),
-        ("theta-mg", Integrator::ThetaMg, false),
-        ("xpbd", Integrator::Xpbd, false),
+    let engine = Method::Engine;
+    let columns: [(&str, Method, bool); 11] = [
+        (
+            "symplectic Euler",
+            engine(Integrator::SymplecticEuler),
+            false,
+        ),
+        ("harmonic (Jacobi)", engine(Integrator::Harmonic), false),
+        ("harmonic-forced", Method::HARMONIC_FORCED, false),
+        ("harmonic-gs", engine(Integrator::HarmonicGs), false),
+        ("harmonic-forced-gs", Method::HARMONIC_FORCED_GS, false),
+        ("harmonic-sgs", Method::HARMONIC_SGS, false),
+        (
+            "harmonic, exact displacement",
+            engine(Integrator::Harmonic),
+            true,
+        ),
+        ("explicit Euler", engine(Integrator::ExplicitEuler), false),
+        ("implicit-euler", engine(Integrator::ImplicitEuler), false),
+        ("theta-mg", engine(Integrator::ThetaMg), false),
+        ("xpbd", engine(Integrator::Xpbd), false),
     ];
     let names: Vec<&str> = columns.iter().map(|c| c.0).collect();
     let _ = writeln!(out, "| system | {} |", names.join(" | "));
@@ -73,10 +82,10 @@ pub fn report(opts: &Options) -> String {
             .map(|&(_, integrator, exact)| {
                 let ours = fmt_threshold(threshold(&p, integrator, exact, max), max);
                 let theirs = match (integrator, exact) {
-                    (Integrator::SymplecticEuler, _) => study.symplectic_euler,
-                    (Integrator::Harmonic, false) => study.harmonic,
-                    (Integrator::HarmonicForced, _) => study.forced,
-                    (Integrator::HarmonicGs, _) => study.gauss_seidel,
+                    (Method::Engine(Integrator::SymplecticEuler), _) => study.symplectic_euler,
+                    (Method::Engine(Integrator::Harmonic), false) => study.harmonic,
+                    (Method::HARMONIC_FORCED, _) => study.forced,
+                    (Method::Engine(Integrator::HarmonicGs), _) => study.gauss_seidel,
                     _ => f64::NAN,
                 };
                 if theirs.is_nan() {

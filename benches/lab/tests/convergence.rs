@@ -1,8 +1,11 @@
-//! Every integrator converges to a fine-step RK4 reference at its order as h shrinks (and the
-//! paper's printed step does not converge at all).
+//! Every integrator, the engine's and the lab's research variants, converges to a fine-step
+//! RK4 reference at its order as h shrinks (and the paper's printed step does not converge at
+//! all).
 
+use harmonic::internals::buffers::Packed;
 use harmonic::internals::metrics::rms;
 use harmonic::prelude::*;
+use harmonic_lab::research::{Method, Stepper};
 
 const T: f64 = 0.25;
 
@@ -17,21 +20,15 @@ fn chain() -> Scene {
     .unwrap()
 }
 
-fn positions_at_t(integrator: Integrator, exact: bool, steps: u32) -> Vec<DVec3> {
-    let mut sim = Simulation::from_scene(&chain()).unwrap();
-    let config = SimConfig {
-        dt: T / steps as f64,
-        substeps: 1,
-        auto_substeps: false,
-        integrator,
-        exact_displacement: exact,
-        ..*sim.config()
-    };
-    sim.set_config(config).unwrap();
+fn positions_at_t(method: Method, exact: bool, steps: u32) -> Vec<DVec3> {
+    let scene = chain();
+    let mut p = Packed::gather(&scene.build().world).unwrap();
+    let mut stepper = Stepper::new(method, exact, DVec3::from(scene.gravity));
+    let h = T / steps as f64;
     for _ in 0..steps {
-        sim.step().unwrap();
+        stepper.substep(&mut p, h).unwrap();
     }
-    sim.positions().to_vec()
+    p.x
 }
 
 fn sci(v: &[f64]) -> String {
@@ -42,7 +39,7 @@ fn sci(v: &[f64]) -> String {
 }
 
 /// Errors at N, 2N, 4N steps and the observed order log2(e(h)/e(h/2)) of the last halving.
-fn order(integrator: Integrator, exact: bool, n: u32, reference: &[DVec3]) -> (Vec<f64>, f64) {
+fn order(integrator: Method, exact: bool, n: u32, reference: &[DVec3]) -> (Vec<f64>, f64) {
     let errors: Vec<f64> = [n, 2 * n, 4 * n]
         .iter()
         .map(|&k| rms(&positions_at_t(integrator, exact, k), reference))
@@ -53,11 +50,9 @@ fn order(integrator: Integrator, exact: bool, n: u32, reference: &[DVec3]) -> (V
 
 #[test]
 fn integrators_converge_at_their_order() {
-    let sim = Simulation::from_scene(&chain()).unwrap();
+    let p = Packed::gather(&chain().build().world).unwrap();
     let hc = std::f64::consts::PI
-        / sim
-            .packed()
-            .springs
+        / p.springs
             .iter()
             .map(|s| s.omega0_sq())
             .fold(0.0, f64::max)
@@ -65,8 +60,8 @@ fn integrators_converge_at_their_order() {
     // Steps for h = 0.1 h_c (first-order methods) and 0.4 h_c (RK4).
     let n_small = (T / (0.1 * hc)).ceil() as u32;
     let n_rk = (T / (0.4 * hc)).ceil() as u32;
-    let reference = positions_at_t(Integrator::Rk4, false, 64 * n_small);
-    let finer = positions_at_t(Integrator::Rk4, false, 128 * n_small);
+    let reference = positions_at_t(Method::RK4, false, 64 * n_small);
+    let finer = positions_at_t(Method::RK4, false, 128 * n_small);
     let ref_err = rms(&reference, &finer);
     println!(
         "reference: RK4 at h = {:.3e} s; halving it moves it by {ref_err:.2e} m",
@@ -74,17 +69,32 @@ fn integrators_converge_at_their_order() {
     );
 
     let cases = [
-        (Integrator::ExplicitEuler, false, n_small, 1.0),
-        (Integrator::SymplecticEuler, false, n_small, 1.0),
-        (Integrator::Harmonic, false, n_small, 1.0),
-        (Integrator::Harmonic, true, n_small, 1.0),
-        (Integrator::HarmonicGs, false, n_small, 1.0),
-        (Integrator::HarmonicSgs, false, n_small, 1.0),
-        (Integrator::HarmonicForced, false, n_small, 1.0),
-        (Integrator::HarmonicForcedGs, false, n_small, 1.0),
-        (Integrator::ImplicitEuler, false, n_small, 1.0),
-        (Integrator::Xpbd, false, n_small, 1.0),
-        (Integrator::Rk4, false, n_rk, 4.0),
+        (
+            Method::Engine(Integrator::ExplicitEuler),
+            false,
+            n_small,
+            1.0,
+        ),
+        (
+            Method::Engine(Integrator::SymplecticEuler),
+            false,
+            n_small,
+            1.0,
+        ),
+        (Method::Engine(Integrator::Harmonic), false, n_small, 1.0),
+        (Method::Engine(Integrator::Harmonic), true, n_small, 1.0),
+        (Method::Engine(Integrator::HarmonicGs), false, n_small, 1.0),
+        (Method::HARMONIC_SGS, false, n_small, 1.0),
+        (Method::HARMONIC_FORCED, false, n_small, 1.0),
+        (Method::HARMONIC_FORCED_GS, false, n_small, 1.0),
+        (
+            Method::Engine(Integrator::ImplicitEuler),
+            false,
+            n_small,
+            1.0,
+        ),
+        (Method::Engine(Integrator::Xpbd), false, n_small, 1.0),
+        (Method::RK4, false, n_rk, 4.0),
     ];
     for (integrator, exact, n, expected) in cases {
         let (errors, p) = order(integrator, exact, n, &reference);
@@ -104,7 +114,7 @@ fn integrators_converge_at_their_order() {
     }
 
     // The printed paper step is inconsistent: halving h does not reduce its error.
-    let (errors, p) = order(Integrator::HarmonicPaper, false, n_small, &reference);
+    let (errors, p) = order(Method::HARMONIC_PAPER, false, n_small, &reference);
     println!(
         "harmonic-paper: RMS errors {}, observed order {p:.2} (inconsistent: expected ≈ 0)",
         sci(&errors)

@@ -5,9 +5,9 @@
 //! `μ/(2(m_i+m_j))`), the mass split of eq. 17, the damped integral of eq. 19–23 (only `κδ`
 //! integrated, `1/(α²+ω_d²)` where `e^(−αh)` belongs) and `ω_d` of eq. 27 with 2 where 4
 //! belongs. Algorithm 1's extra factor `h` on the velocity change lives in the particle
-//! update (see `solver`).
+//! update ([`super::solver`]).
 
-use crate::buffers::reduced_mass;
+use harmonic::internals::buffers::reduced_mass;
 
 /// Per-spring constants of the printed method.
 #[derive(Clone, Copy, Debug, PartialEq)]
