@@ -127,3 +127,30 @@ impl GridLink {
         cols.saturating_sub(dc) as u64 * rows.saturating_sub(dr) as u64
     }
 }
+
+/// A mesh cloth's surface: its triangles, indexing its particles from scene index `first`
+/// (what the render draws; the springs are [`Spring`] entities).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MeshSurface {
+    /// Scene index of the mesh's particle 0.
+    pub first: u32,
+    /// Triangles over the mesh's particles (0-based).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl MeshSurface {
+    /// Every mesh's triangles in `world`, in scene indices, appended to `out` in scene order.
+    pub fn all(world: &hecs::World, out: &mut Vec<[u32; 3]>) {
+        let mut surfaces: Vec<(u32, hecs::Entity)> = world
+            .query::<(hecs::Entity, &MeshSurface)>()
+            .iter()
+            .map(|(e, s)| (s.first, e))
+            .collect();
+        surfaces.sort_unstable();
+        for (_, e) in surfaces {
+            if let Ok(s) = world.get::<&MeshSurface>(e) {
+                out.extend(s.triangles.iter().map(|t| t.map(|i| s.first + i)));
+            }
+        }
+    }
+}

@@ -61,7 +61,7 @@ pub mod math {
 
 pub use audit::EnergyAudit;
 pub use components::{
-    ClothGrid, ClothSprings, GridLink, Particle, Pin, Quarantined, SceneIndex, Spring,
+    ClothGrid, ClothSprings, GridLink, MeshSurface, Particle, Pin, Quarantined, SceneIndex, Spring,
 };
 pub use config::{Backend, Integrator, SimConfig, RESEARCH_INTEGRATORS};
 pub use contacts::{Attachment, Body, BodyMass, ContactStats, Props, RigidProp};

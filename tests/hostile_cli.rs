@@ -517,3 +517,28 @@ fn a_scene_naming_a_research_integrator_is_pointed_to_the_lab() {
         );
     }
 }
+
+#[test]
+fn the_trajectory_never_overwrites_a_mesh_file_the_scene_reads() {
+    let dir = temp("mesh-link");
+    std::fs::create_dir_all(&dir).unwrap();
+    let obj = dir.join("square.obj");
+    let text = "v 0 1 0\nv 1 1 0\nv 1 0 0\nv 0 0 0\nf 1 2 3 4\n";
+    std::fs::write(&obj, text).unwrap();
+    let scene = dir.join("scene.ron");
+    std::fs::write(
+        &scene,
+        "Scene(dt: 0.01, seconds: 0.02, meshes: [(file: \"square.obj\", mass: 0.1,
+           stretch: (frequency: 5.0), pins: [Vertices([0])])])",
+    )
+    .unwrap();
+    let link = dir.join("link.obj");
+    let _ = std::fs::remove_file(&link);
+    std::fs::hard_link(&obj, &link).unwrap();
+    let (scene, link) = (scene.to_str().unwrap(), link.to_str().unwrap());
+    refused(
+        &["run", scene, "--trajectory", link],
+        &["--trajectory", "a mesh file the scene reads"],
+    );
+    assert_eq!(std::fs::read_to_string(&obj).unwrap(), text);
+}

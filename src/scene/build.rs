@@ -3,8 +3,11 @@
 use glam::DVec3;
 use hecs::{Entity, World};
 
+use super::mesh::MeshCloth;
 use super::{Anchor, Cloth, Plane, Rope, Scene, SpringSpec};
-use crate::components::{ClothGrid, ClothSprings, GridLink, Particle, Pin, SceneIndex, Spring};
+use crate::components::{
+    ClothGrid, ClothSprings, GridLink, MeshSurface, Particle, Pin, SceneIndex, Spring,
+};
 use crate::integrate::Integrator;
 use crate::SimConfig;
 
@@ -22,7 +25,8 @@ pub struct BuiltScene {
 }
 
 impl BuiltScene {
-    /// The cloths' triangles (see [`ClothGrid::triangles`]).
+    /// The cloths' triangles (see [`ClothGrid::triangles`]), then the meshes'
+    /// ([`MeshSurface`]), in scene indices.
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let mut out = Vec::new();
         for &e in &self.cloths {
@@ -30,6 +34,7 @@ impl BuiltScene {
                 c.grid.triangles(&mut out);
             }
         }
+        MeshSurface::all(&self.world, &mut out);
         out
     }
 }
@@ -181,6 +186,34 @@ impl Builder {
         self.cloths.push(e);
     }
 
+    /// A mesh cloth: its particles, a spring per edge (and across each interior edge), and a
+    /// [`MeshSurface`] for its render triangles. Springs given by frequency resolve through the
+    /// mesh's reference mass.
+    fn mesh(&mut self, m: &MeshCloth, at: &str) {
+        let t = m.topology(at);
+        let first = self.next;
+        let vel = DVec3::from(m.velocity);
+        let ids: Vec<Entity> = (t.positions.iter().zip(&t.masses).zip(&t.pinned))
+            .map(|((&x, &mass), &pinned)| self.particle(x, vel, mass, pinned))
+            .collect();
+        let r = t.reference_mass();
+        let rest = |[a, b]: [u32; 2]| (t.positions[b as usize] - t.positions[a as usize]).length();
+        for &e in &t.edges {
+            let (a, b) = (ids[e[0] as usize], ids[e[1] as usize]);
+            self.spring(a, b, &m.stretch, (r, r), rest(e));
+        }
+        if let Some(bend) = &m.bend {
+            for &e in &t.bends {
+                let (a, b) = (ids[e[0] as usize], ids[e[1] as usize]);
+                self.spring(a, b, bend, (r, r), rest(e));
+            }
+        }
+        self.world.spawn((MeshSurface {
+            first,
+            triangles: t.triangles,
+        },));
+    }
+
     fn rope(&mut self, r: &Rope) {
         let n = r.particles as usize;
         let m = r.mass / n as f64;
@@ -240,6 +273,9 @@ impl Scene {
         }
         for r in &self.ropes {
             b.rope(r);
+        }
+        for (i, m) in self.meshes.iter().enumerate() {
+            b.mesh(m, &format!("meshes[{i}]"));
         }
         let integrator = self
             .integrator

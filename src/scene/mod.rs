@@ -1,9 +1,10 @@
 //! RON scenes: the schema authors write, loading with located errors, and building a World.
 //!
 //! A scene lists explicit `particles` and `springs` (indices are positions in `particles`)
-//! and any number of generated `cloths` and `ropes`. Particle order in the built scene, and
-//! so in trajectories: explicit particles, then each cloth row-major (row 0 first, columns
-//! left to right), then each rope from `start` to `end`.
+//! and any number of generated `cloths` and `ropes`, and cloths given as triangle `meshes`.
+//! Particle order in the built scene, and so in trajectories: explicit particles, then each
+//! cloth row-major (row 0 first, columns left to right), then each rope from `start` to `end`,
+//! then each mesh's welded vertices in order of first appearance.
 //!
 //! # Stiffness by frequency
 //! A spring takes either `stiffness` (κ, N/m) or `frequency` (f, Hz), and either `damping`
@@ -15,6 +16,7 @@
 
 mod build;
 pub use build::spawn_cloth;
+pub mod mesh;
 pub mod props;
 mod validate;
 
@@ -224,6 +226,9 @@ pub struct Scene {
     /// Generated ropes and chains.
     #[serde(default)]
     pub ropes: Vec<Rope>,
+    /// Cloths given as triangle meshes.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub meshes: Vec<mesh::MeshCloth>,
     /// Rigid props (rapier bodies, one collider each). None: no contact stage, no rapier world.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub bodies: Vec<props::BodyDef>,
@@ -415,6 +420,7 @@ impl Scene {
             springs: vec![],
             cloths: vec![],
             ropes: vec![],
+            meshes: vec![],
             bodies: vec![],
             contact: None,
             attachments: vec![],
@@ -449,12 +455,20 @@ impl Scene {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let options = ron::Options::default()
             .with_default_extension(ron::extensions::Extensions::IMPLICIT_SOME);
-        let scene: Scene = options.from_str(text).map_err(|e| SceneError::Parse {
+        let mut scene: Scene = options.from_str(text).map_err(|e| SceneError::Parse {
             path: path.clone(),
             line: e.span.start.line,
             column: e.span.start.col,
             message: e.code.to_string(),
         })?;
+        // Mesh files beside the scene, read before anything is checked.
+        let dir = path.parent().unwrap_or(Path::new(""));
+        let issues: Vec<Issue> = (scene.meshes.iter_mut().enumerate())
+            .filter_map(|(i, m)| m.read_file(dir, &format!("meshes[{i}]")).err())
+            .collect();
+        if !issues.is_empty() {
+            return Err(SceneError::Invalid { path, issues });
+        }
         let issues = scene.validate_with(limits);
         if issues.is_empty() {
             Ok(scene)
@@ -463,19 +477,24 @@ impl Scene {
         }
     }
 
-    /// Number of particles the scene builds (saturating, so huge generators can be refused).
+    /// Number of particles the scene builds (saturating, so huge generators can be refused);
+    /// a mesh counts its vertices before welding, at most what it builds.
     pub fn particle_count(&self) -> u64 {
         let cloth = self
             .cloths
             .iter()
             .map(|c| c.resolution.0 as u64 * c.resolution.1 as u64);
         let rope = self.ropes.iter().map(|r| r.particles as u64);
+        // A mesh by its vertices before welding: at most what it builds.
+        let mesh = self.meshes.iter().map(|m| m.vertices.len() as u64);
         cloth
             .chain(rope)
+            .chain(mesh)
             .fold(self.particles.len() as u64, u64::saturating_add)
     }
 
-    /// Number of springs the scene builds (saturating), counted from its description.
+    /// Number of springs the scene builds (saturating), counted from its description; a mesh
+    /// counts at most what it builds.
     pub fn spring_count(&self) -> u64 {
         let cloth = self.cloths.iter().map(|c| {
             let (x, y) = (c.resolution.0 as u64, c.resolution.1 as u64);
@@ -498,8 +517,14 @@ impl Scene {
                     0
                 }
         });
+        // A mesh at most: three edges per triangle, and a bend across each (shared) edge.
+        let mesh = self.meshes.iter().map(|m| {
+            let t = m.triangles.len() as u64;
+            t.saturating_mul(if m.bend.is_some() { 6 } else { 3 })
+        });
         cloth
             .chain(rope)
+            .chain(mesh)
             .fold(self.springs.len() as u64, u64::saturating_add)
     }
 }

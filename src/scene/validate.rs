@@ -4,22 +4,22 @@ use super::{Anchor, Limits, Scene, SpringSpec, SPEED_BOUND, V3, WORLD_BOUND};
 use crate::error::Issue;
 use crate::integrate::Integrator;
 
-struct Issues(Vec<Issue>);
+pub(super) struct Issues(pub(super) Vec<Issue>);
 
 impl Issues {
-    fn push(&mut self, location: impl Into<String>, message: impl Into<String>) {
+    pub(super) fn push(&mut self, location: impl Into<String>, message: impl Into<String>) {
         self.0.push(Issue {
             location: location.into(),
             message: message.into(),
         });
     }
-    fn positive(&mut self, location: impl Into<String>, v: f64) {
+    pub(super) fn positive(&mut self, location: impl Into<String>, v: f64) {
         if !(v.is_finite() && v > 0.0) {
             self.push(location, format!("must be finite and > 0, got {v:?}"));
         }
     }
     /// A limit: > 0, infinite for none; `unit` says what it is a share of, if anything.
-    fn limit(&mut self, location: &str, v: Option<f64>, unit: &str) {
+    pub(super) fn limit(&mut self, location: &str, v: Option<f64>, unit: &str) {
         if let Some(l) = v.filter(|l| l.is_nan() || *l <= 0.0) {
             self.push(
                 location,
@@ -27,25 +27,25 @@ impl Issues {
             );
         }
     }
-    fn non_negative(&mut self, location: impl Into<String>, v: f64) {
+    pub(super) fn non_negative(&mut self, location: impl Into<String>, v: f64) {
         if !(v.is_finite() && v >= 0.0) {
             self.push(location, format!("must be finite and ≥ 0, got {v:?}"));
         }
     }
-    fn finite(&mut self, location: impl Into<String>, v: V3) {
+    pub(super) fn finite(&mut self, location: impl Into<String>, v: V3) {
         if !v.iter().all(|c| c.is_finite()) {
             self.push(location, format!("must be finite, got {v:?}"));
         }
     }
     /// A point: finite, each coordinate within [`WORLD_BOUND`].
-    fn point(&mut self, location: impl Into<String>, v: V3) {
+    pub(super) fn point(&mut self, location: impl Into<String>, v: V3) {
         self.bounded(location, v, WORLD_BOUND, "m (WORLD_BOUND)");
     }
     /// A velocity: finite, each component within [`SPEED_BOUND`].
-    fn speed(&mut self, location: impl Into<String>, v: V3) {
+    pub(super) fn speed(&mut self, location: impl Into<String>, v: V3) {
         self.bounded(location, v, SPEED_BOUND, "m/s or rad/s (SPEED_BOUND)");
     }
-    fn bounded(&mut self, location: impl Into<String>, v: V3, bound: f64, unit: &str) {
+    pub(super) fn bounded(&mut self, location: impl Into<String>, v: V3, bound: f64, unit: &str) {
         let location = location.into();
         let before = self.0.len();
         self.finite(location.clone(), v);
@@ -57,7 +57,7 @@ impl Issues {
         }
     }
     /// A length: finite, > 0 and within [`WORLD_BOUND`].
-    fn size(&mut self, location: impl Into<String>, v: f64) {
+    pub(super) fn size(&mut self, location: impl Into<String>, v: f64) {
         let location = location.into();
         let before = self.0.len();
         self.positive(location.clone(), v);
@@ -70,7 +70,7 @@ impl Issues {
     }
     /// An axis-angle rotation: finite, its angle at most [`crate::contacts::MAX_ANGLE`] (it is
     /// taken modulo 4π, which beyond that is rounding noise).
-    fn rotation(&mut self, location: impl Into<String>, v: V3) {
+    pub(super) fn rotation(&mut self, location: impl Into<String>, v: V3) {
         let location = location.into();
         let before = self.0.len();
         self.finite(location.clone(), v);
@@ -88,7 +88,7 @@ impl Issues {
     /// [`Self::spec`], then the stiffness and damping it gives between masses `m_a`, `m_b`
     /// within f32's range: the GPU back end's precision, beyond which the step would freeze
     /// the spring's ends (the CPU does the same, so the back ends agree).
-    fn spec_between(&mut self, at: &str, s: &SpringSpec, m_a: f64, m_b: f64) {
+    pub(super) fn spec_between(&mut self, at: &str, s: &SpringSpec, m_a: f64, m_b: f64) {
         let before = self.0.len();
         self.spec(at, s);
         let mass_ok = |m: f64| m.is_finite() && m > 0.0;
@@ -110,7 +110,7 @@ impl Issues {
         }
     }
 
-    fn spec(&mut self, at: &str, s: &SpringSpec) {
+    pub(super) fn spec(&mut self, at: &str, s: &SpringSpec) {
         match (s.stiffness, s.frequency) {
             (Some(k), None) => self.non_negative(format!("{at}.stiffness"), k),
             (None, Some(f)) => self.positive(format!("{at}.frequency"), f),
@@ -291,6 +291,9 @@ impl Scene {
             if let Some(s) = &r.bend {
                 is.spec_between(&format!("{at}.bend"), s, m, m);
             }
+        }
+        for (i, m) in self.meshes.iter().enumerate() {
+            m.check(&format!("meshes[{i}]"), limits, &mut is);
         }
         self.validate_props(&mut is);
         for (count, limit, what) in [

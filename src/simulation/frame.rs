@@ -59,6 +59,7 @@ pub(super) fn frame_triangles<'a>(
                 grid.triangles(&mut out);
             }
         }
+        crate::components::MeshSurface::all(world, &mut out);
         out
     })
 }

@@ -258,6 +258,9 @@ fn check(paths: &[PathBuf], limits: &Limits) -> Result<(), String> {
 /// simulation, and take the run's length; its particles and frames, or the first problem.
 fn checked(path: &std::path::Path, limits: &Limits) -> Result<(usize, u64), String> {
     let scene = Scene::load_with(path, limits).map_err(|e| e.to_string())?;
+    for w in scene.warnings() {
+        eprintln!("warning: {}: {w}", path.display());
+    }
     let at = |e: String| format!("{}: {e}", path.display());
     let sim = Simulation::from_scene_with(&scene, limits).map_err(|e| at(e.to_string()))?;
     let frames = frames(None, None, scene.seconds, sim.config(), limits).map_err(at)?;
@@ -275,8 +278,8 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     if let Some(path) = &args.trajectory {
-        // Every file the scene reads (today the scene file alone), by identity: a hard link
-        // or a symlink to the scene is the scene.
+        // The scene file by identity: a hard link or a symlink to the scene is the scene (its
+        // mesh files are checked once it is read).
         if trajectory::same_file(path, &args.scene) {
             return Err(format!(
                 "--trajectory {}: that is the scene being run (the same file); name another file",
@@ -285,6 +288,21 @@ fn run(args: RunArgs) -> Result<(), String> {
         }
     }
     let scene = Scene::load_with(&args.scene, &limits).map_err(|e| e.to_string())?;
+    for w in scene.warnings() {
+        eprintln!("warning: {}: {w}", args.scene.display());
+    }
+    if let Some(path) = &args.trajectory {
+        // The mesh files it read are the scene's too.
+        let dir = args.scene.parent().unwrap_or(std::path::Path::new(""));
+        let read = scene.meshes.iter().filter_map(|m| m.file_path(dir));
+        if let Some(file) = read.into_iter().find(|f| trajectory::same_file(path, f)) {
+            return Err(format!(
+                "--trajectory {}: that is {}, a mesh file the scene reads; name another file",
+                path.display(),
+                file.display()
+            ));
+        }
+    }
     let built = scene.build();
     let mut config = built.config;
     if let Some(dt) = args.dt {
