@@ -457,3 +457,38 @@ fn bad_mesh_files_get_located_errors() {
         );
     }
 }
+
+#[test]
+fn a_mesh_vertex_hangs_on_a_body() {
+    // A small square mesh held by one corner at a point of a kinematic body that moves along
+    // +x at 0.5 m/s: the corner follows the body; the cloth hangs from it.
+    let text = "Scene(dt: 0.01, substeps: 20, integrator: \"symplectic-euler\",
+        meshes: [(vertices: [(0, 2, 0), (0.3, 2, 0), (0.3, 1.7, 0), (0, 1.7, 0), (0, 2, 0)],
+                  triangles: [(0, 1, 2), (4, 2, 3)], mass: 0.05,
+                  stretch: (frequency: 20.0, damping_ratio: 0.5))],
+        bodies: [(kind: Kinematic, shape: Ball(radius: 0.05), position: (0, 2.1, 0),
+                  velocity: (0.5, 0, 0))],
+        attachments: [(particle: Mesh(0, 4), body: 0, local: (0, -0.1, 0))])";
+    let scene = Scene::parse(text, "attached.ron").unwrap();
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..50 {
+        sim.step().unwrap();
+    }
+    // Vertex 4 welds into particle 0; after 0.5 s the body is at x = 0.25.
+    let corner = sim.positions()[0];
+    assert!(
+        (corner - DVec3::new(0.25, 2.0, 0.0)).length() < 1e-3,
+        "{corner:?}"
+    );
+    assert!(
+        sim.positions()[2].y < 1.75,
+        "the cloth hangs from its corner"
+    );
+    // A vertex that does not exist is a located error.
+    let bad = text.replace("Mesh(0, 4)", "Mesh(0, 9)");
+    let err = Scene::parse(&bad, "attached.ron").unwrap_err().to_string();
+    assert!(
+        err.contains("attachments[0].particle: vertex 9 of mesh 0 does not exist"),
+        "{err}"
+    );
+}

@@ -317,6 +317,7 @@ impl Scene {
         use super::props::ParticleRef;
         match p {
             ParticleRef::Particle(k) => (k < self.particles.len()).then_some(k as u32),
+            ParticleRef::Mesh(m, v) => self.mesh_particle(m, v).ok(),
             ParticleRef::Cloth(c, col, row) => {
                 let before: u64 = self.particles.len() as u64
                     + self.cloths[..c.min(self.cloths.len())]

@@ -430,6 +430,42 @@ impl MeshCloth {
 }
 
 impl super::Scene {
+    /// The scene index of the particle vertex `v` of mesh `m` welds into, or why there is none
+    /// (no such mesh or vertex, or a vertex in no triangle).
+    pub(super) fn mesh_particle(&self, m: usize, v: u32) -> Result<u32, String> {
+        let mesh = (self.meshes.get(m)).ok_or_else(|| format!("mesh {m} does not exist"))?;
+        let sound = |x: &MeshCloth| {
+            let n = x.vertices.len();
+            x.triangles.iter().flatten().all(|&i| (i as usize) < n)
+        };
+        if (v as usize) >= mesh.vertices.len() || !sound(mesh) {
+            return Err(format!(
+                "vertex {v} of mesh {m} does not exist ({} vertices)",
+                mesh.vertices.len()
+            ));
+        }
+        let before_meshes = self.particles.len() as u64
+            + (self.cloths.iter())
+                .map(|c| u64::from(c.resolution.0) * u64::from(c.resolution.1))
+                .sum::<u64>()
+            + self
+                .ropes
+                .iter()
+                .map(|r| u64::from(r.particles))
+                .sum::<u64>();
+        let mut before = before_meshes;
+        for earlier in &self.meshes[..m] {
+            if !sound(earlier) {
+                return Err(format!("an earlier mesh than {m} is not sound"));
+            }
+            before += earlier.topology("").positions.len() as u64;
+        }
+        let Some(i) = mesh.topology("").particle_of[v as usize] else {
+            return Err(format!("vertex {v} of mesh {m} is in no triangle"));
+        };
+        Ok((before + u64::from(i)) as u32)
+    }
+
     /// What the meshes' building drops or finds suspect, located (`meshes[0].triangles[4]: … has
     /// no area once welded: dropped`); not errors. For a scene that passed validation.
     pub fn warnings(&self) -> Vec<Issue> {

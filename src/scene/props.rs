@@ -175,6 +175,8 @@ pub enum ParticleRef {
     Particle(usize),
     /// `(cloth, column, row)` of `cloths`.
     Cloth(usize, u32, u32),
+    /// `(mesh, vertex)` of `meshes`: the particle the vertex welds into.
+    Mesh(usize, u32),
 }
 
 /// A particle held at a point of a body: it follows the body; a dynamic body feels its pull.

@@ -559,6 +559,11 @@ impl Scene {
                     ),
                     Some(_) => {}
                 },
+                ParticleRef::Mesh(m, v) => {
+                    if let Err(e) = self.mesh_particle(m, v) {
+                        is.push(format!("{at}.particle"), e);
+                    }
+                }
                 _ => {}
             }
         }
