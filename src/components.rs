@@ -134,6 +134,8 @@ impl GridLink {
 pub struct MeshSurface {
     /// Scene index of the mesh's particle 0.
     pub first: u32,
+    /// Its particles: scene indices `first .. first + count`.
+    pub count: u32,
     /// Triangles over the mesh's particles (0-based).
     pub triangles: Vec<[u32; 3]>,
 }
@@ -148,9 +150,15 @@ impl MeshSurface {
             .collect();
         surfaces.sort_unstable();
         for (_, e) in surfaces {
-            if let Ok(s) = world.get::<&MeshSurface>(e) {
-                out.extend(s.triangles.iter().map(|t| t.map(|i| s.first + i)));
-            }
+            Self::all_of(world, e, out);
+        }
+    }
+
+    /// The triangles of the mesh whose surface is entity `e`, in scene indices, appended to
+    /// `out`.
+    pub fn all_of(world: &hecs::World, e: hecs::Entity, out: &mut Vec<[u32; 3]>) {
+        if let Ok(s) = world.get::<&MeshSurface>(e) {
+            out.extend(s.triangles.iter().map(|t| t.map(|i| s.first + i)));
         }
     }
 }

@@ -492,3 +492,70 @@ fn a_mesh_vertex_hangs_on_a_body() {
         "{err}"
     );
 }
+
+#[test]
+fn removing_a_cloth_before_a_mesh_keeps_the_mesh_drawn() {
+    let (v, t) = grid_mesh(3, 0.5, 3.0);
+    let text = format!(
+        "Scene(dt: 0.01, cloths: [(origin: (0, 1, 0), size: (1, 1), resolution: (4, 4),
+           mass: 0.1, structural: (stiffness: 10.0), pins: [TopEdge])],
+         meshes: [{}])",
+        mesh_ron(&v, &t, "mass: 0.1, stretch: (stiffness: 10.0)")
+    );
+    let scene = Scene::parse(&text, "two.ron").unwrap();
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let (id, _) = sim.cloths().next().unwrap();
+    sim.remove_cloth(id).unwrap();
+    sim.step().unwrap();
+    // The cloth's 16 particles are gone: the mesh's are 0..9 and its triangles index them.
+    assert_eq!(sim.positions().len(), 9);
+    assert_eq!(sim.triangles(), &t[..]);
+    assert!((sim.positions()[0].y - 3.0).abs() < 0.01);
+}
+
+#[test]
+fn a_mesh_is_added_and_removed_at_run_time() {
+    let grid = Scene::parse(
+        "Scene(dt: 0.01, cloths: [(origin: (0, 1, 0), size: (1, 1), resolution: (4, 4),
+           mass: 0.1, structural: (stiffness: 10.0), pins: [TopEdge])])",
+        "grid.ron",
+    )
+    .unwrap();
+    let mut sim = Simulation::from_scene(&grid).unwrap();
+    let grid_triangles = sim.triangles().to_vec();
+    let (v, t) = grid_mesh(3, 0.5, 3.0);
+    let text = mesh_ron(
+        &v,
+        &t,
+        "mass: 0.1, stretch: (stiffness: 10.0), pins: [Vertices([0])]",
+    );
+    let mesh: MeshCloth = scene(&text, "").unwrap().meshes[0].clone();
+    let id = sim.add_mesh(&mesh).unwrap();
+    sim.step().unwrap();
+    // After the grid's 16 particles: the mesh's 9, its triangles shifted by 16.
+    assert_eq!(sim.positions().len(), 25);
+    let mut want = grid_triangles.clone();
+    want.extend(t.iter().map(|t| t.map(|i| i + 16)));
+    assert_eq!(sim.triangles(), &want[..]);
+    assert_eq!(
+        sim.cloths().map(|(_, r)| r).collect::<Vec<_>>(),
+        vec![0..16, 16..25]
+    );
+    assert_eq!(
+        sim.positions()[16],
+        DVec3::new(0.0, 3.0, 0.0),
+        "its pin holds"
+    );
+    sim.remove_cloth(id).unwrap();
+    sim.step().unwrap();
+    assert_eq!(sim.positions().len(), 16);
+    assert_eq!(sim.triangles(), &grid_triangles[..]);
+    // An invalid mesh is refused by name.
+    let mut bad = mesh;
+    bad.triangles.push([0, 1, 99]);
+    let err = sim.add_mesh(&bad).unwrap_err().to_string();
+    assert!(
+        err.contains("add_mesh") && err.contains("vertex 99 does not exist"),
+        "{err}"
+    );
+}

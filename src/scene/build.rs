@@ -20,7 +20,8 @@ pub struct BuiltScene {
     pub config: SimConfig,
     /// The rapier world of the scene's bodies; None without bodies (no contact stage then).
     pub props: Option<crate::contacts::Props>,
-    /// Each cloth's entity, holding its [`ClothSprings`] (and so its grid).
+    /// Each cloth's entity, holding its [`ClothSprings`] (and so its grid), then each mesh's,
+    /// holding its [`MeshSurface`].
     pub cloths: Vec<Entity>,
 }
 
@@ -43,12 +44,23 @@ impl BuiltScene {
 /// numbered from scene index `first`; returns the [`ClothSprings`] entity. The cloth must have
 /// passed validation.
 pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Entity {
+    spawn(world, first, |b| b.cloth(cloth))
+}
+
+/// Spawns `mesh` into `world` (its particles, springs and one [`MeshSurface`]) with its
+/// particles numbered from scene index `first`; returns the [`MeshSurface`] entity. The mesh
+/// must have passed validation.
+pub fn spawn_mesh(world: &mut World, first: u32, mesh: &MeshCloth) -> Entity {
+    spawn(world, first, |b| b.mesh(mesh, "mesh"))
+}
+
+fn spawn(world: &mut World, first: u32, part: impl FnOnce(&mut Builder)) -> Entity {
     let mut b = Builder {
         world: std::mem::take(world),
         next: first,
         cloths: Vec::new(),
     };
-    b.cloth(cloth);
+    part(&mut b);
     *world = b.world;
     b.cloths[0]
 }
@@ -208,10 +220,12 @@ impl Builder {
                 self.spring(a, b, bend, (r, r), rest(e));
             }
         }
-        self.world.spawn((MeshSurface {
+        let e = self.world.spawn((MeshSurface {
             first,
+            count: t.positions.len() as u32,
             triangles: t.triangles,
         },));
+        self.cloths.push(e);
     }
 
     fn rope(&mut self, r: &Rope) {

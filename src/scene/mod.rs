@@ -15,7 +15,7 @@
 //! `damping_ratio` means `c = 2 ζ √(κ μ)`.
 
 mod build;
-pub use build::spawn_cloth;
+pub use build::{spawn_cloth, spawn_mesh};
 pub mod mesh;
 pub mod props;
 mod validate;

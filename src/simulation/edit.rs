@@ -83,12 +83,43 @@ impl Simulation {
     }
 
     /// The cloths, each with its particles' range in scene order (see [`Self::positions`]);
-    /// a cloth whose [`ClothSprings`] were despawned through [`Self::world_mut`] is left out.
+    /// a cloth whose [`ClothSprings`] (or a mesh whose [`crate::MeshSurface`]) were despawned
+    /// through [`Self::world_mut`] is left out. Meshes are cloths here too.
     pub fn cloths(&self) -> impl Iterator<Item = (ClothId, std::ops::Range<usize>)> + '_ {
         self.cloths.iter().filter_map(|&(id, e)| {
-            let r = grid_of(&self.world, e)?.range();
+            let r = range_of(&self.world, e)?;
             Some((id, r.start as usize..r.end as usize))
         })
+    }
+
+    /// Adds a mesh cloth, validated as a scene's would be (its geometry inline: a scene's
+    /// `file` is read by [`Scene::load`]), after every particle of the scene; its triangles join
+    /// [`Self::triangles`], and [`Self::remove_cloth`] removes it. Re-gathers on the next step.
+    pub fn add_mesh(&mut self, mesh: &crate::scene::mesh::MeshCloth) -> Result<ClothId, Error> {
+        let mut check = Scene::new(self.config.dt);
+        check.meshes.push(mesh.clone());
+        valid_part(&check, "add_mesh")?;
+        let first = self.next_index();
+        let e = crate::scene::spawn_mesh(&mut self.world, first, mesh);
+        let id = ClothId(self.next_cloth);
+        self.next_cloth += 1;
+        self.cloths.push((id, e));
+        if let Some(custom) = &mut self.frame.custom {
+            crate::MeshSurface::all_of(&self.world, e, custom);
+        }
+        self.frame.triangles.take();
+        self.dirty = true;
+        Ok(id)
+    }
+
+    /// The scene index after every particle's.
+    fn next_index(&self) -> u32 {
+        self.world
+            .query::<&SceneIndex>()
+            .iter()
+            .map(|i| i.0 + 1)
+            .max()
+            .unwrap_or(0)
     }
 
     /// Adds a cloth, validated as a scene's would be, after every particle of the scene
@@ -97,13 +128,7 @@ impl Simulation {
         let mut check = Scene::new(self.config.dt);
         check.cloths.push(cloth.clone());
         valid_part(&check, "add_cloth")?;
-        let first = self
-            .world
-            .query::<&SceneIndex>()
-            .iter()
-            .map(|i| i.0 + 1)
-            .max()
-            .unwrap_or(0);
+        let first = self.next_index();
         let e = crate::scene::spawn_cloth(&mut self.world, first, cloth);
         let id = ClothId(self.next_cloth);
         self.next_cloth += 1;
@@ -127,12 +152,8 @@ impl Simulation {
             .position(|(c, _)| *c == id)
             .ok_or(SimError::UnknownCloth)?;
         let (_, e) = self.cloths.remove(k);
-        let grid = grid_of(&self.world, e);
-        // Its springs' component removed by hand: the particles are no longer a cloth.
-        let grid = grid.ok_or(SimError::UnknownCloth)?;
-        // A built cloth's indices fit u32 (validated).
-        let range = grid.range();
-        let range = range.start as u32..range.end as u32;
+        // Its springs' (or surface's) component removed by hand: no longer a cloth.
+        let range = range_of(&self.world, e).ok_or(SimError::UnknownCloth)?;
         let n = range.end - range.start;
         let doomed: std::collections::HashSet<Entity> = self
             .world
@@ -158,6 +179,8 @@ impl Simulation {
                 c.grid.first -= n;
             }
         }
+        // A mesh's surface goes with it (a grid's is its springs' entity, listed above).
+        springs.push(e);
         for e in springs.into_iter().chain(doomed.iter().copied()) {
             let _ = self.world.despawn(e);
         }
@@ -165,6 +188,14 @@ impl Simulation {
         for i in self.world.query_mut::<&mut SceneIndex>() {
             if i.0 >= range.end {
                 i.0 -= n;
+            }
+        }
+        for m in self
+            .world
+            .query_mut::<&mut crate::components::MeshSurface>()
+        {
+            if m.first >= range.end {
+                m.first -= n;
             }
         }
         if let Some(custom) = &mut self.frame.custom {

@@ -69,6 +69,18 @@ pub(super) fn grid_of(world: &World, e: Entity) -> Option<ClothGrid> {
     world.get::<&ClothSprings>(e).ok().map(|c| c.grid)
 }
 
+/// A cloth's particles in scene order: a grid's ([`ClothSprings`]) or a mesh's
+/// ([`crate::MeshSurface`]); `None` once its entity is gone.
+pub(super) fn range_of(world: &World, e: Entity) -> Option<std::ops::Range<u32>> {
+    if let Some(g) = grid_of(world, e) {
+        let r = g.range();
+        // A built cloth's indices fit u32 (validated).
+        return Some(r.start as u32..r.end as u32);
+    }
+    let m = world.get::<&crate::MeshSurface>(e).ok()?;
+    Some(m.first..m.first + m.count)
+}
+
 /// What a renderer uploads each frame: positions and normals (f32, one per particle in scene
 /// order) and the triangles indexing them. Borrowed from buffers the simulation keeps, so a
 /// frame allocates nothing.

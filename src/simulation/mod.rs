@@ -36,7 +36,7 @@ mod run;
 mod step;
 
 use coupling::Coupling;
-use frame::{grid_of, Frame};
+use frame::{grid_of, range_of, Frame};
 pub use frame::{Advance, RenderView};
 use quarantine::contain;
 
