@@ -436,7 +436,7 @@ fn bad_mesh_files_get_located_errors() {
         ("file: \"missing.obj\"", "missing.obj"),
         (
             "file: \"cloth.stl\"",
-            "only Wavefront OBJ files (.obj) are read",
+            "only Wavefront OBJ (.obj) and glTF 2.0 (.gltf, .glb)",
         ),
         ("file: \"dir.obj\"", "a directory"),
         ("file: \"broken.obj\"", "not a readable OBJ file"),
@@ -558,4 +558,94 @@ fn a_mesh_is_added_and_removed_at_run_time() {
         err.contains("add_mesh") && err.contains("vertex 99 does not exist"),
         "{err}"
     );
+}
+
+/// A glTF document of one quad (two triangles, u16 indices) on a node translated by `(0, 2, 0)`
+/// and scaled by 2, with its buffer at `uri`; and the buffer's bytes.
+fn quad_gltf(uri: &str) -> (String, Vec<u8>) {
+    let positions: [[f32; 3]; 4] = [
+        [0.0, 0.0, 0.0],
+        [0.5, 0.0, 0.0],
+        [0.5, 0.0, 0.5],
+        [0.0, 0.0, 0.5],
+    ];
+    let indices: [u16; 6] = [0, 1, 2, 0, 2, 3];
+    let mut bin: Vec<u8> = positions
+        .iter()
+        .flatten()
+        .flat_map(|c| c.to_le_bytes())
+        .collect();
+    bin.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    let uri = if uri.is_empty() {
+        String::new()
+    } else {
+        format!(r#""uri": "{uri}", "#)
+    };
+    let json = format!(
+        r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
+          "nodes": [{{"mesh": 0, "translation": [0, 2, 0], "scale": [2, 2, 2]}}],
+          "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
+          "buffers": [{{{uri}"byteLength": 60}}],
+          "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
+                          {{"buffer": 0, "byteOffset": 48, "byteLength": 12}}],
+          "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+                          "min": [0, 0, 0], "max": [0.5, 0, 0.5]}},
+                        {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}}]}}"#
+    );
+    (json, bin)
+}
+
+/// A `.glb`: the header, the JSON chunk padded with spaces, the binary chunk with zeros.
+fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+    let mut j = json.as_bytes().to_vec();
+    j.resize(j.len().div_ceil(4) * 4, b' ');
+    let mut b = bin.to_vec();
+    b.resize(b.len().div_ceil(4) * 4, 0);
+    let total = 12 + 8 + j.len() + 8 + b.len();
+    let mut out = b"glTF".to_vec();
+    out.extend(2u32.to_le_bytes());
+    out.extend((total as u32).to_le_bytes());
+    out.extend((j.len() as u32).to_le_bytes());
+    out.extend(0x4E4F_534Au32.to_le_bytes());
+    out.extend(j);
+    out.extend((b.len() as u32).to_le_bytes());
+    out.extend(0x004E_4942u32.to_le_bytes());
+    out.extend(b);
+    out
+}
+
+#[test]
+fn gltf_files_are_read_and_placed_by_their_node() {
+    let dir = std::env::temp_dir().join(format!("harmonic-gltf-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (json, bin) = quad_gltf("quad.bin");
+    std::fs::write(dir.join("quad.gltf"), &json).unwrap();
+    std::fs::write(dir.join("quad.bin"), &bin).unwrap();
+    let (json_glb, _) = quad_gltf("");
+    std::fs::write(dir.join("quad.glb"), glb(&json_glb, &bin)).unwrap();
+    let (embedded, _) = quad_gltf("data:application/octet-stream;base64,AAAA");
+    std::fs::write(dir.join("embedded.gltf"), embedded).unwrap();
+    let load = |file: &str| {
+        let text = format!(
+            "Scene(dt: 0.01, meshes: [(file: \"{file}\", mass: 0.1, stretch: (stiffness: 10.0))])"
+        );
+        Scene::parse(&text, dir.join("scene.ron"))
+    };
+    for file in ["quad.gltf", "quad.glb"] {
+        let scene = load(file).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let m = &scene.meshes[0];
+        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]], "{file}");
+        // The node scales by 2 and lifts by 2.
+        assert_eq!(m.vertices[2], [1.0, 2.0, 1.0], "{file}");
+        let t = m.topology("m");
+        assert!((t.masses.iter().sum::<f64>() - 0.1).abs() < 1e-12);
+    }
+    let err = load("embedded.gltf").unwrap_err().to_string();
+    assert!(
+        err.contains("meshes[0].file: ") && err.contains("embedded (base64) buffer"),
+        "{err}"
+    );
+    std::fs::write(dir.join("broken.glb"), b"glTF not really").unwrap();
+    let err = load("broken.glb").unwrap_err().to_string();
+    assert!(err.contains("not a readable glTF"), "{err}");
 }

@@ -6,7 +6,6 @@
 //! per mesh (its mean vertex mass), so uneven triangles keep one material.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
 
 use glam::{DQuat, DVec3};
 use serde::{Deserialize, Serialize};
@@ -25,8 +24,9 @@ fn default_weld() -> f64 {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct MeshCloth {
-    /// A Wavefront OBJ file (`.obj`, a path relative to the scene file) to read `vertices` and
-    /// `triangles` from: every object in it, its faces triangulated; give this or the two.
+    /// A file beside the scene (a path relative to the scene file) to read `vertices` and
+    /// `triangles` from: Wavefront OBJ (every object, faces triangulated) or glTF 2.0 (`.gltf`
+    /// with its `.bin`, or `.glb`: the first mesh, placed by its node); give this or the two.
     #[serde(default)]
     pub file: Option<String>,
     /// Vertex positions in the mesh's own frame (m, before `transform`).
@@ -472,63 +472,5 @@ impl super::Scene {
         (self.meshes.iter().enumerate())
             .flat_map(|(i, m)| m.topology(&format!("meshes[{i}]")).warnings)
             .collect()
-    }
-}
-
-impl MeshCloth {
-    /// Its file's path, resolved against the scene's directory `dir`.
-    pub fn file_path(&self, dir: &Path) -> Option<PathBuf> {
-        self.file.as_ref().map(|f| dir.join(f))
-    }
-
-    /// Reads its `file` into `vertices` and `triangles` (`at` locates the problems: a file
-    /// that cannot be read, is not OBJ, is past [`super::MAX_FILE_BYTES`] or does not parse,
-    /// or inline geometry beside it). Nothing to do without a file.
-    pub(super) fn read_file(&mut self, dir: &Path, at: &str) -> Result<(), Issue> {
-        let Some(path) = self.file_path(dir) else {
-            return Ok(());
-        };
-        let issue = |message: String| Issue {
-            location: format!("{at}.file"),
-            message,
-        };
-        if !self.vertices.is_empty() || !self.triangles.is_empty() {
-            return Err(issue(
-                "give `file` or inline `vertices` and `triangles`, not both".into(),
-            ));
-        }
-        let obj = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-        if !obj {
-            return Err(issue(format!(
-                "{}: only Wavefront OBJ files (.obj) are read",
-                path.display()
-            )));
-        }
-        let text = super::read_text(&path).map_err(|e| issue(e.to_string()))?;
-        let options = tobj::LoadOptions {
-            triangulate: true,
-            ignore_points: true,
-            ignore_lines: true,
-            ..Default::default()
-        };
-        // Materials are not read: a cloth takes its material from the scene.
-        let (models, _) = tobj::load_obj_buf(&mut text.as_bytes(), &options, |_| {
-            Err(tobj::LoadError::GenericFailure)
-        })
-        .map_err(|e| issue(format!("{}: not a readable OBJ file ({e})", path.display())))?;
-        for model in models {
-            let m = &model.mesh;
-            let base = self.vertices.len() as u32;
-            self.vertices
-                .extend(m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]));
-            self.triangles.extend(
-                m.indices
-                    .chunks_exact(3)
-                    .map(|t| [base + t[0], base + t[1], base + t[2]]),
-            );
-        }
-        Ok(())
     }
 }

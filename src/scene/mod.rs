@@ -17,6 +17,7 @@
 mod build;
 pub use build::{spawn_cloth, spawn_mesh};
 pub mod mesh;
+mod mesh_file;
 pub mod props;
 mod validate;
 
