@@ -105,36 +105,17 @@ impl Clock {
             return Ok(());
         }
         let bytes = (n * wgpu::QUERY_SIZE as usize) as u64;
-        let failed = |e: &dyn std::fmt::Display| GpuError::Readback(e.to_string());
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.read
-            .slice(..bytes)
-            .map_async(wgpu::MapMode::Read, move |r| {
-                let _ = tx.send(r);
-            });
-        ctx.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| failed(&e))?;
-        match rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(failed(&e)),
-            Err(e) => return Err(failed(&e)),
-        }
-        {
-            let view = self
-                .read
-                .get_mapped_range(..bytes)
-                .map_err(|e| failed(&e))?;
-            let ticks: &[u64] = bytemuck::cast_slice(&view);
-            for (i, stage) in self.marks.iter().enumerate().skip(1) {
+        let (marks, times, period) = (&self.marks, &mut self.times, self.period);
+        super::map_read(ctx, &self.read, bytes, |view| {
+            let ticks: &[u64] = bytemuck::cast_slice(view);
+            for (i, stage) in marks.iter().enumerate().skip(1) {
                 if let Some(kind) = stage {
                     // A device may reorder or reset its counter: a negative span is dropped.
-                    let span = ticks[i].saturating_sub(ticks[i - 1]) as f64 * self.period;
-                    self.times[*kind] += std::time::Duration::from_nanos(span as u64);
+                    let span = ticks[i].saturating_sub(ticks[i - 1]) as f64 * period;
+                    times[*kind] += std::time::Duration::from_nanos(span as u64);
                 }
             }
-        }
-        self.read.unmap();
+        })?;
         self.marks.clear();
         Ok(())
     }

@@ -435,6 +435,16 @@ pub(crate) fn read_staging(
         copy(&mut encoder);
         ctx.queue.submit([encoder.finish()]);
     })?;
+    map_read(ctx, staging, bytes, read)
+}
+
+/// Waits for the queued work and reads the first `bytes` of a mappable `staging` buffer.
+pub(super) fn map_read(
+    ctx: &GpuContext,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    read: impl FnOnce(&[u8]),
+) -> Result<(), GpuError> {
     let failed = |e: &dyn std::fmt::Display| GpuError::Readback(e.to_string());
     let (tx, rx) = std::sync::mpsc::channel();
     staging
