@@ -169,6 +169,11 @@ fn bad_meshes_get_located_errors() {
             "vertex 7 does not exist",
         ),
         (
+            "(vertices: [(0, 0, 0), (1, 0, 0), (0, 1, 0)], triangles: [(0, 1, 2)], mass: 1.0, stretch: (stiffness: 1.0), pins: [Attribute(\"_PIN\", 0.5)])",
+            "meshes[0].pins[0]",
+            "vertex attributes come from a glTF file",
+        ),
+        (
             "(vertices: [(0, 0, 0), (1, 0, 0), (0, 1e6, 0)], triangles: [(0, 1, 2)], mass: 1.0, stretch: (stiffness: 1.0))",
             "meshes[0].vertices[2] (placed)",
             "world's bound",
@@ -560,8 +565,9 @@ fn a_mesh_is_added_and_removed_at_run_time() {
     );
 }
 
-/// A glTF document of one quad (two triangles, u16 indices) on a node translated by `(0, 2, 0)`
-/// and scaled by 2, with its buffer at `uri`; and the buffer's bytes.
+/// A glTF document of one quad (two triangles, u16 indices, a custom `_PIN` weight of 1 at
+/// vertices 0 and 3) on a node translated by `(0, 2, 0)` and scaled by 2, with its buffer at
+/// `uri`; and the buffer's bytes.
 fn quad_gltf(uri: &str) -> (String, Vec<u8>) {
     let positions: [[f32; 3]; 4] = [
         [0.0, 0.0, 0.0],
@@ -576,6 +582,7 @@ fn quad_gltf(uri: &str) -> (String, Vec<u8>) {
         .flat_map(|c| c.to_le_bytes())
         .collect();
     bin.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    bin.extend([1.0f32, 0.0, 0.0, 1.0].iter().flat_map(|w| w.to_le_bytes()));
     let uri = if uri.is_empty() {
         String::new()
     } else {
@@ -584,13 +591,15 @@ fn quad_gltf(uri: &str) -> (String, Vec<u8>) {
     let json = format!(
         r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}],
           "nodes": [{{"mesh": 0, "translation": [0, 2, 0], "scale": [2, 2, 2]}}],
-          "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1}}]}}],
-          "buffers": [{{{uri}"byteLength": 60}}],
+          "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0, "_PIN": 2}}, "indices": 1}}]}}],
+          "buffers": [{{{uri}"byteLength": 76}}],
           "bufferViews": [{{"buffer": 0, "byteOffset": 0, "byteLength": 48}},
-                          {{"buffer": 0, "byteOffset": 48, "byteLength": 12}}],
+                          {{"buffer": 0, "byteOffset": 48, "byteLength": 12}},
+                          {{"buffer": 0, "byteOffset": 60, "byteLength": 16}}],
           "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
                           "min": [0, 0, 0], "max": [0.5, 0, 0.5]}},
-                        {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}}]}}"#
+                        {{"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}},
+                        {{"bufferView": 2, "componentType": 5126, "count": 4, "type": "SCALAR"}}]}}"#
     );
     (json, bin)
 }
@@ -625,12 +634,13 @@ fn gltf_files_are_read_and_placed_by_their_node() {
     std::fs::write(dir.join("quad.glb"), glb(&json_glb, &bin)).unwrap();
     let (embedded, _) = quad_gltf("data:application/octet-stream;base64,AAAA");
     std::fs::write(dir.join("embedded.gltf"), embedded).unwrap();
-    let load = |file: &str| {
+    let load_with = |file: &str, pins: &str| {
         let text = format!(
-            "Scene(dt: 0.01, meshes: [(file: \"{file}\", mass: 0.1, stretch: (stiffness: 10.0))])"
+            "Scene(dt: 0.01, meshes: [(file: \"{file}\", mass: 0.1, stretch: (stiffness: 10.0), pins: [{pins}])])"
         );
         Scene::parse(&text, dir.join("scene.ron"))
     };
+    let load = |file: &str| load_with(file, "");
     for file in ["quad.gltf", "quad.glb"] {
         let scene = load(file).unwrap_or_else(|e| panic!("{file}: {e}"));
         let m = &scene.meshes[0];
@@ -639,6 +649,20 @@ fn gltf_files_are_read_and_placed_by_their_node() {
         assert_eq!(m.vertices[2], [1.0, 2.0, 1.0], "{file}");
         let t = m.topology("m");
         assert!((t.masses.iter().sum::<f64>() - 0.1).abs() < 1e-12);
+    }
+    // Pins painted as a vertex attribute.
+    let scene = load_with("quad.glb", "Attribute(\"_PIN\", 0.5)").unwrap();
+    let t = scene.meshes[0].topology("m");
+    assert_eq!(t.pinned, vec![true, false, false, true]);
+    for (pins, needle) in [
+        (
+            "Attribute(\"_PIN\", 2.0)",
+            "meshes[0].pins[0]: no vertex has _PIN ≥ 2",
+        ),
+        ("Attribute(\"_WEIGHT\", 0.5)", "meshes[0].file: "),
+    ] {
+        let err = load_with("quad.glb", pins).unwrap_err().to_string();
+        assert!(err.contains(needle), "{pins}: {err}");
     }
     let err = load("embedded.gltf").unwrap_err().to_string();
     assert!(

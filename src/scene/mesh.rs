@@ -59,6 +59,10 @@ pub struct MeshCloth {
     /// Start velocity of every particle (m/s).
     #[serde(default)]
     pub velocity: V3,
+    /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
+    /// read with its file; not written to a scene.
+    #[serde(skip)]
+    pub attributes: Vec<(String, Vec<f64>)>,
 }
 
 /// Scale, then rotation, then translation.
@@ -103,6 +107,18 @@ pub enum MeshPin {
     Above(V3, f64),
     /// Every vertex inside the box `(min, max)`.
     Box(V3, V3),
+    /// Every vertex whose value of a glTF file's scalar float attribute (a custom one such as
+    /// `_PIN`, painted in the modeller) is at least the threshold: `Attribute("_PIN", 0.5)`.
+    Attribute(String, f64),
+}
+
+impl MeshCloth {
+    /// The values of attribute `name` read from its file, one per vertex.
+    pub fn attribute(&self, name: &str) -> Option<&[f64]> {
+        (self.attributes.iter())
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| &v[..])
+    }
 }
 
 /// The cloth a mesh gives: particles in order of first appearance among the vertices.
@@ -254,6 +270,14 @@ impl MeshCloth {
                         t.pinned[i] |= pin.holds(*x);
                     }
                 }
+                MeshPin::Attribute(name, least) => {
+                    let values = self.attribute(name).unwrap_or(&[]);
+                    for (v, _) in values.iter().enumerate().filter(|(_, w)| *w >= least) {
+                        if let Some(Some(i)) = t.particle_of.get(v) {
+                            t.pinned[*i as usize] = true;
+                        }
+                    }
+                }
             }
         }
         t
@@ -264,7 +288,7 @@ impl MeshPin {
     /// Whether a region pin holds a particle at `x` (a vertex list holds none by position).
     pub fn holds(&self, x: DVec3) -> bool {
         match self {
-            MeshPin::Vertices(_) => false,
+            MeshPin::Vertices(_) | MeshPin::Attribute(..) => false,
             MeshPin::Above(n, d) => DVec3::from(*n).dot(x) >= *d,
             MeshPin::Box(lo, hi) => {
                 x.cmpge(DVec3::from(*lo)).all() && x.cmple(DVec3::from(*hi)).all()
@@ -386,6 +410,19 @@ impl MeshCloth {
                         is.push(pat, "needs a non-zero normal and a finite offset");
                     }
                 }
+                MeshPin::Attribute(name, least) => {
+                    if self.attribute(name).is_none() {
+                        is.push(
+                            pat,
+                            format!(
+                                "no values of {name}: vertex attributes come from a glTF file's \
+                                 primitives (`file: \"….glb\"`)"
+                            ),
+                        );
+                    } else if !least.is_finite() {
+                        is.push(pat, format!("needs a finite threshold, got {least:?}"));
+                    }
+                }
                 MeshPin::Box(lo, hi) => {
                     is.finite(format!("{pat}.0"), *lo);
                     is.finite(format!("{pat}.1"), *hi);
@@ -412,6 +449,15 @@ impl MeshCloth {
             return;
         }
         for (j, pin) in self.pins.iter().enumerate() {
+            if let MeshPin::Attribute(name, least) = pin {
+                if !(self.attribute(name).unwrap_or(&[]).iter()).any(|w| w >= least) {
+                    is.push(
+                        format!("{at}.pins[{j}]"),
+                        format!("no vertex has {name} ≥ {least}"),
+                    );
+                }
+                continue;
+            }
             if !matches!(pin, MeshPin::Vertices(_))
                 && !topology.positions.iter().any(|&x| pin.holds(x))
             {

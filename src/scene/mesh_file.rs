@@ -104,6 +104,14 @@ impl MeshCloth {
             buffers.push(data);
         }
         let mesh = gltf.meshes().next().ok_or("it has no mesh")?;
+        // The attributes its pins name, vertex by vertex alongside the positions.
+        let names: Vec<String> = (self.pins.iter())
+            .filter_map(|p| match p {
+                super::mesh::MeshPin::Attribute(name, _) => Some(name.clone()),
+                _ => None,
+            })
+            .collect();
+        let mut values: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
         let place = node_transform(&gltf, mesh.index()).unwrap_or(DMat4::IDENTITY);
         for primitive in mesh.primitives() {
             if primitive.mode() != gltf::mesh::Mode::Triangles {
@@ -120,6 +128,30 @@ impl MeshCloth {
                 })
                 .collect();
             let n = positions.len() as u32;
+            for (name, out) in names.iter().zip(&mut values) {
+                let custom = name
+                    .strip_prefix('_')
+                    .map(|s| gltf::Semantic::Extras(s.into()));
+                let accessor = custom.and_then(|s| primitive.get(&s)).ok_or_else(|| {
+                    format!(
+                        "primitive {} has no attribute {name} (a custom scalar attribute, `_` first)",
+                        primitive.index()
+                    )
+                })?;
+                let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(|d| &d[..]);
+                let read = gltf::accessor::Iter::<f32>::new(accessor, get).ok_or_else(|| {
+                    format!("{name} of primitive {} is not readable", primitive.index())
+                })?;
+                let before = out.len();
+                out.extend(read.map(f64::from));
+                if out.len() - before != n as usize {
+                    return Err(format!(
+                        "{name} of primitive {} has {} values for {n} vertices",
+                        primitive.index(),
+                        out.len() - before
+                    ));
+                }
+            }
             let indices: Vec<u32> = match reader.read_indices() {
                 Some(i) => i.into_u32().collect(),
                 None => (0..n).collect(),
@@ -132,6 +164,7 @@ impl MeshCloth {
         if self.triangles.is_empty() {
             return Err(format!("mesh {} has no triangle primitive", mesh.index()));
         }
+        self.attributes = names.into_iter().zip(values).collect();
         Ok(())
     }
 
