@@ -42,7 +42,9 @@ pub struct EnergyAudit {
     /// Put in by the game between frames: particles dragged, pinned, freed or given a
     /// velocity, cloths added or removed, gravity changed (the change of `E` each made).
     pub edits: f64,
-    /// Put in by attached particles following their bodies, within the frame.
+    /// Put in by attached particles following their bodies, and by the drive stage (driven
+    /// pins following the game's targets, particles kept within their maximum distance of
+    /// them), within the frame.
     pub attachments: f64,
     /// Put in by the game's forces ([`crate::Simulation::set_forces`]) within the frame: their
     /// work `Σ F·Δx` over the integrate stage's moves (as gravity's is part of `E`).
@@ -98,7 +100,8 @@ pub enum Line {
     Damping,
     /// [`EnergyAudit::forces`]: the force stages' work.
     Forces,
-    /// [`EnergyAudit::attachments`]: the contact stage's attached particles.
+    /// [`EnergyAudit::attachments`]: the contact stage's attached particles, the drive stage's
+    /// moves.
     Attachments,
     /// [`EnergyAudit::contacts`]: the contact stage's push-out.
     Contacts,

@@ -164,6 +164,18 @@ pub enum SimError {
     /// [`crate::ClothSprings`] despawned).
     #[error("no such cloth in this simulation (removed already?)")]
     UnknownCloth,
+    /// The [`crate::DriveId`] names no drive of this simulation (removed already).
+    #[error("no such drive in this simulation (removed already?)")]
+    UnknownDrive,
+    /// A drive's particles, targets or maximum distances are wrong ([`crate::Simulation::drive`],
+    /// [`crate::Simulation::set_drive_targets`]): the call and the element are named.
+    #[error("{call}: {what}")]
+    BadDrive {
+        /// The call that refused it.
+        call: &'static str,
+        /// What is wrong, naming the element.
+        what: String,
+    },
     /// The body is not in this simulation's rigid-body set (or the simulation has none).
     #[error("no such body in this simulation (removed already?)")]
     UnknownBody,

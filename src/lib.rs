@@ -69,7 +69,7 @@ pub use error::{Error, GpuError, Issue, SceneError, SimError};
 pub use scene::props::{BodyKind, ContactMaterial, Shape};
 pub use scene::Scene;
 pub use schedule::{Cadence, Failure, Place, Schedule, Stage, StageKind, StageTimes, StepStats};
-pub use simulation::{Advance, ClothId, Diagnostics, RenderView, Simulation};
+pub use simulation::{Advance, ClothId, Diagnostics, DriveId, RenderView, Simulation};
 pub use step_control::StepChoice;
 
 // The versions the engine is built against, so a game matches them without guessing.

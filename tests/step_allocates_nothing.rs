@@ -100,4 +100,27 @@ fn stepping_allocates_nothing() {
         forced, 0,
         "set_forces + step allocated {forced} times in 120 frames"
     );
+    // Driven pins and motion constraints, their targets set anew every frame.
+    sim.clear_forces();
+    let n = sim.positions().len();
+    let pins = sim.drive(&[0, 23]).unwrap();
+    let free: Vec<usize> = (24..n).step_by(5).collect();
+    let within = sim.drive_within(&free, &vec![0.05; free.len()]).unwrap();
+    let mut pose = free.iter().map(|&i| sim.positions()[i]).collect::<Vec<_>>();
+    let mut ends = [sim.positions()[0], sim.positions()[23]];
+    sim.step().unwrap();
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..120 {
+        let step = DVec3::new(1e-3, 0.0, 0.0);
+        ends.iter_mut().for_each(|x| *x += step);
+        pose.iter_mut().for_each(|x| *x += step);
+        sim.set_drive_targets(pins, &ends).unwrap();
+        sim.set_drive_targets(within, &pose).unwrap();
+        sim.step().unwrap();
+    }
+    let driven = ALLOCS.load(Ordering::Relaxed) - before;
+    assert_eq!(
+        driven, 0,
+        "set_drive_targets + step allocated {driven} times in 120 frames"
+    );
 }

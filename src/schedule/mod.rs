@@ -31,6 +31,9 @@ pub enum StageKind {
     Forces,
     /// The springs' step: the integrator's kernel over every spring and particle.
     Integrate,
+    /// Driven pins moved along their paths to the game's targets, and particles kept within
+    /// their maximum distance of them ([`crate::Simulation::drive`]), a share every substep.
+    Drive,
     /// Rigid bodies (the scene's own rapier world or the caller's sets): attached particles
     /// follow their bodies, then particles are pushed out of colliders with friction and the
     /// dynamic bodies get the opposite impulses.
@@ -42,10 +45,11 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 5] = [
+    pub const ALL: [StageKind; 6] = [
         StageKind::Gravity,
         StageKind::Forces,
         StageKind::Integrate,
+        StageKind::Drive,
         StageKind::Contacts,
         StageKind::Quarantine,
     ];
@@ -59,6 +63,7 @@ impl StageKind {
             StageKind::Gravity => "gravity",
             StageKind::Forces => "forces",
             StageKind::Integrate => "integrate",
+            StageKind::Drive => "drive",
             StageKind::Contacts => "contacts",
             StageKind::Quarantine => "quarantine",
         }
@@ -69,7 +74,10 @@ impl StageKind {
         match self {
             StageKind::Gravity => Cadence::Fused,
             StageKind::Forces => Cadence::Frame,
-            StageKind::Integrate | StageKind::Contacts | StageKind::Quarantine => Cadence::Substep,
+            StageKind::Integrate
+            | StageKind::Drive
+            | StageKind::Contacts
+            | StageKind::Quarantine => Cadence::Substep,
         }
     }
 
@@ -78,7 +86,7 @@ impl StageKind {
         match self {
             StageKind::Gravity | StageKind::Forces => Place::BeforeIntegrate,
             StageKind::Integrate => Place::Integrate,
-            StageKind::Contacts | StageKind::Quarantine => Place::AfterIntegrate,
+            StageKind::Drive | StageKind::Contacts | StageKind::Quarantine => Place::AfterIntegrate,
         }
     }
 
@@ -88,6 +96,9 @@ impl StageKind {
             StageKind::Gravity => "potential energy (part of the energy itself)",
             StageKind::Forces => "forces: their work over the integrate stage's moves",
             StageKind::Integrate => "damping: the dampers' loss",
+            StageKind::Drive => {
+                "attachments: the driven pins' moves and the maximum distances' projections"
+            }
             StageKind::Contacts => "attachments, contacts and friction: its projections",
             StageKind::Quarantine => "quarantine: the energy of the particles it froze",
         }
@@ -136,7 +147,7 @@ impl Stage {
     /// whose springs run on the device (the state then goes back and forth every substep). The
     /// quarantine only checks the state where it is on the host anyway.
     pub fn needs_host_state(&self) -> bool {
-        self.on == Backend::Cpu && self.kind == StageKind::Contacts
+        self.on == Backend::Cpu && matches!(self.kind, StageKind::Drive | StageKind::Contacts)
     }
 }
 
@@ -156,6 +167,8 @@ pub(crate) struct Needs {
     pub(crate) gravity: bool,
     /// The game set per-particle forces.
     pub(crate) forces: bool,
+    /// The game drives particles.
+    pub(crate) drives: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -182,6 +195,9 @@ impl Schedule {
             push(StageKind::Forces, n.springs_on);
         }
         push(StageKind::Integrate, n.springs_on);
+        if n.drives {
+            push(StageKind::Drive, Backend::Cpu);
+        }
         if let Some(on) = n.contacts_on {
             push(StageKind::Contacts, on);
         }

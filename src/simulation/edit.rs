@@ -58,7 +58,7 @@ impl Simulation {
     /// Records an edit of particle `index` that the World already holds, for the next step:
     /// its pin set or freed, and a pinned particle moved to `at`. After a World change the
     /// next step re-gathers instead and reads it there.
-    fn edited(&mut self, index: usize, pin: Option<bool>, at: Option<DVec3>) {
+    pub(super) fn edited(&mut self, index: usize, pin: Option<bool>, at: Option<DVec3>) {
         if self.dirty {
             return;
         }
@@ -73,7 +73,7 @@ impl Simulation {
     }
 
     /// Takes the pin off particle `index` (entity `e`); it starts at rest.
-    fn free(&mut self, index: usize, e: Entity) {
+    pub(super) fn free(&mut self, index: usize, e: Entity) {
         if self.world.remove_one::<Pin>(e).is_ok() {
             if let Ok(mut p) = self.world.get::<&mut crate::Particle>(e) {
                 p.velocity = DVec3::ZERO;

@@ -27,6 +27,7 @@ use crate::step_control::{self, StepChoice};
 
 mod accuracy;
 mod coupling;
+mod drive;
 mod edit;
 mod forces;
 mod frame;
@@ -36,6 +37,7 @@ mod run;
 mod step;
 
 use coupling::Coupling;
+pub use drive::DriveId;
 use frame::{grid_of, range_of, Frame};
 pub use frame::{Advance, RenderView};
 use quarantine::contain;
@@ -96,6 +98,8 @@ pub struct Simulation {
     schedule: Schedule,
     /// The game's per-particle forces ([`Simulation::set_forces`]).
     forces: Option<forces::Forces>,
+    /// Driven pins and motion constraints ([`Simulation::drive`]).
+    drives: drive::Drives,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -239,6 +243,7 @@ impl Simulation {
             stats: StepStats::default(),
             schedule: Schedule::default(),
             forces: None,
+            drives: Default::default(),
             timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
@@ -486,6 +491,7 @@ impl Simulation {
         self.schedule.rebuild(Needs {
             gravity: self.config.gravity != DVec3::ZERO,
             forces: self.forces.is_some(),
+            drives: !self.drives.is_empty(),
             integrator: self.config.integrator,
             substeps: self.config.substeps,
             springs_on: self.backend(),

@@ -9,7 +9,7 @@
 //! when a host stage needs it, and at the frame's end.
 
 use super::*;
-use crate::audit::{Auditor, DamperLaw};
+use crate::audit::{Auditor, DamperLaw, Line};
 use crate::schedule::{Schedule, Stage, StageKind, StageTimes};
 
 /// What the stages of one frame work on: borrowed from the [`Simulation`], so the frame can
@@ -19,6 +19,11 @@ pub(super) struct Run<'a> {
     /// The game's forces and the frame's external accelerations, when the force stage is
     /// listed.
     pub(super) forces: Option<&'a super::forces::Forces>,
+    /// The drives, when the drive stage is listed.
+    pub(super) drives: Option<&'a mut super::drive::Drives>,
+    pub(super) gravity: DVec3,
+    /// The frame's substeps (a retry's, once it runs).
+    pub(super) frame_substeps: u32,
     pub(super) packed: &'a mut Packed,
     pub(super) solver: &'a mut Solver,
     pub(super) auditor: &'a mut Auditor,
@@ -88,6 +93,7 @@ impl Run<'_> {
     pub(super) fn substeps(&mut self, substeps: u32, h: f64) -> Result<(), SimError> {
         let schedule = self.schedule;
         let per_submit = schedule.substeps_per_submit(substeps);
+        self.frame_substeps = substeps;
         if self.timed {
             self.lap = Instant::now();
         }
@@ -100,6 +106,11 @@ impl Run<'_> {
             let n = per_submit.min(substeps - k);
             for &s in schedule.stages() {
                 self.begin(s, k, n, h);
+            }
+            #[cfg(feature = "gpu")]
+            if let Some(d) = self.device.as_mut().filter(|d| d.host_newer) {
+                d.gpu.write_state(self.packed);
+                d.host_newer = false;
             }
             for &s in schedule.stages() {
                 self.run(s, k, n, h)?;
@@ -136,6 +147,9 @@ impl Run<'_> {
 
     /// The stages' frame end: the contact stage books its projections on the frame's lines.
     pub(super) fn book_frame(&mut self) {
+        if let Some(d) = &self.drives {
+            self.auditor.book(Line::Attachments, d.energy);
+        }
         if let Some(c) = self.coupling.as_mut() {
             for (line, joules) in c.stage().energy.lines() {
                 self.auditor.book(line, joules);
@@ -146,6 +160,13 @@ impl Run<'_> {
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
     #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
+        if stage.kind == StageKind::Drive && k == 0 {
+            if let Some(d) = self.drives.as_mut() {
+                d.begin_frame(self.packed, self.frame_substeps, h);
+                self.host_moved();
+            }
+            self.charge(StageKind::Drive);
+        }
         if stage.kind != StageKind::Contacts {
             return;
         }
@@ -189,6 +210,14 @@ impl Run<'_> {
                     self.auditor.force_work(self.packed, &f.given);
                 }
                 self.charge_audit();
+            }
+            (StageKind::Drive, _) => {
+                self.state_to_host()?;
+                if let Some(d) = self.drives.as_mut() {
+                    d.substep(self.packed, k + 1, self.gravity);
+                }
+                self.host_moved();
+                self.charge(StageKind::Drive);
             }
             (StageKind::Contacts, Backend::Gpu) => self.device_contacts(k, n)?,
             (StageKind::Contacts, _) => {

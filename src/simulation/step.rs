@@ -134,6 +134,9 @@ impl Simulation {
         let mut run = run::Run {
             schedule: &self.schedule,
             forces,
+            drives: (!self.drives.is_empty()).then_some(&mut self.drives),
+            gravity: self.config.gravity,
+            frame_substeps: 0,
             packed: &mut self.packed,
             solver: &mut self.solver,
             auditor: &mut self.auditor,
@@ -198,6 +201,7 @@ impl Simulation {
         };
         let (times, audit_time) = (run.times, run.audit_time);
         let device_time = (run.device_time, run.device_stages);
+        self.drives.end_frame();
         self.config.substeps = substeps;
         self.finish_frame(
             t0,
@@ -427,6 +431,7 @@ impl Simulation {
             self.quarantine();
             self.packed.regather(&self.world, options)?;
         }
+        self.drives.refresh(&self.packed);
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.estimate_network();
