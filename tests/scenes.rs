@@ -71,3 +71,37 @@ fn bad_scenes_give_their_expected_located_errors() {
         );
     }
 }
+
+/// Every shipped mesh scene runs a second with its energy booked: the steps make no energy
+/// beyond 1 % of the scene's scale (the audit's peak residual) and no failure is reported.
+#[test]
+fn every_mesh_scene_runs_a_second_with_its_energy_booked() {
+    let mut meshes = 0;
+    for path in ron_files(Path::new("scenes")) {
+        let scene = harmonic::Scene::load(&path).unwrap();
+        if scene.meshes.is_empty() {
+            continue;
+        }
+        meshes += 1;
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        let frames = (1.0 / scene.dt).round() as usize;
+        for _ in 0..frames {
+            sim.step().unwrap();
+        }
+        let d = sim.diagnostics();
+        println!(
+            "{}: peak residual {:.2e} of the scale, residual {:.2e}",
+            path.display(),
+            d.audit.relative_peak(),
+            d.audit.relative_residual()
+        );
+        assert!(d.failure.is_none(), "{}: {:?}", path.display(), d.failure);
+        assert!(
+            d.audit.relative_peak() <= 0.01,
+            "{}: {:?}",
+            path.display(),
+            d.audit
+        );
+    }
+    assert!(meshes >= 4, "the cape, skirt, flag and tablecloth");
+}

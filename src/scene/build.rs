@@ -59,6 +59,7 @@ fn spawn(world: &mut World, first: u32, part: impl FnOnce(&mut Builder)) -> Enti
         world: std::mem::take(world),
         next: first,
         cloths: Vec::new(),
+        hung: Vec::new(),
     };
     part(&mut b);
     *world = b.world;
@@ -87,6 +88,8 @@ struct Builder {
     world: World,
     next: u32,
     cloths: Vec<Entity>,
+    /// Pinned mesh particles that hang on a body (`MeshCloth::pinned_to`).
+    hung: Vec<(Entity, usize)>,
 }
 
 impl Builder {
@@ -208,6 +211,10 @@ impl Builder {
         let ids: Vec<Entity> = (t.positions.iter().zip(&t.masses).zip(&t.pinned))
             .map(|((&x, &mass), &pinned)| self.particle(x, vel, mass, pinned))
             .collect();
+        if let Some(body) = m.pinned_to {
+            let pinned = ids.iter().zip(&t.pinned).filter(|(_, &p)| p);
+            self.hung.extend(pinned.map(|(&e, _)| (e, body)));
+        }
         let r = t.reference_mass();
         let rest = |[a, b]: [u32; 2]| (t.positions[b as usize] - t.positions[a as usize]).length();
         for &e in &t.edges {
@@ -269,6 +276,7 @@ impl Scene {
             world: World::new(),
             next: 0,
             cloths: Vec::new(),
+            hung: Vec::new(),
         };
         let ids: Vec<Entity> = self
             .particles
@@ -296,7 +304,7 @@ impl Scene {
             .as_deref()
             .and_then(|n| n.parse::<Integrator>().ok())
             .unwrap_or_default();
-        let props = self.build_props(&mut b.world);
+        let props = self.build_props(&mut b.world, &b.hung);
         BuiltScene {
             props,
             cloths: b.cloths,
@@ -347,7 +355,11 @@ impl Scene {
 
     /// Bodies into a rapier world, and attachments as components on their particles. Assumes
     /// a validated scene: a body whose collider cannot be built is left out.
-    fn build_props(&self, world: &mut World) -> Option<crate::contacts::Props> {
+    fn build_props(
+        &self,
+        world: &mut World,
+        hung: &[(Entity, usize)],
+    ) -> Option<crate::contacts::Props> {
         use crate::contacts::{Attachment, Props};
         if self.bodies.is_empty() {
             return None;
@@ -379,6 +391,22 @@ impl Scene {
                     .inverse_transform_point(x.as_vec3()),
             };
             let _ = world.insert_one(entity, Attachment { body, local });
+        }
+        // Meshes' pins hung on bodies: attached where they start (an explicit attachment of
+        // the same particle comes first), no longer pinned.
+        for &(entity, b) in hung {
+            let Some(&body) = handles.get(b) else {
+                continue;
+            };
+            if world.get::<&Attachment>(entity).is_err() {
+                let x = world.get::<&Particle>(entity).map(|p| p.position);
+                if let Ok(x) = x {
+                    let pose = props.physics.bodies[body].position();
+                    let local = pose.inverse_transform_point(x.as_vec3());
+                    let _ = world.insert_one(entity, Attachment { body, local });
+                }
+            }
+            let _ = world.remove_one::<Pin>(entity);
         }
         Some(props)
     }

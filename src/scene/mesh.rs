@@ -56,6 +56,10 @@ pub struct MeshCloth {
     /// The parts held in place.
     #[serde(default)]
     pub pins: Vec<MeshPin>,
+    /// The body (index into `bodies`) the pinned vertices hang on: they follow it, attached
+    /// where they start, instead of staying where they are (a cape's collar on a character).
+    #[serde(default)]
+    pub pinned_to: Option<usize>,
     /// Start velocity of every particle (m/s).
     #[serde(default)]
     pub velocity: V3,
@@ -510,6 +514,28 @@ impl super::Scene {
             return Err(format!("vertex {v} of mesh {m} is in no triangle"));
         };
         Ok((before + u64::from(i)) as u32)
+    }
+
+    /// The scene index of the particle each vertex of mesh `m` welds into (`None` for a vertex
+    /// in no triangle), in one build of its topology: how a game maps its own mesh's vertices
+    /// (a skinned pose, say) onto the simulation's particles, as [`crate::Simulation::drive`]
+    /// and [`crate::Simulation::positions`] count them. For a scene that passed validation.
+    pub fn mesh_particles(&self, m: usize) -> Result<Vec<Option<u32>>, String> {
+        let mesh = (self.meshes.get(m)).ok_or_else(|| format!("mesh {m} does not exist"))?;
+        let before = self.particles.len() as u64
+            + (self.cloths.iter())
+                .map(|c| u64::from(c.resolution.0) * u64::from(c.resolution.1))
+                .sum::<u64>()
+            + (self.ropes.iter())
+                .map(|r| u64::from(r.particles))
+                .sum::<u64>()
+            + (self.meshes[..m].iter())
+                .map(|e| e.topology("").positions.len() as u64)
+                .sum::<u64>();
+        let t = mesh.topology("");
+        Ok((t.particle_of.iter())
+            .map(|p| p.map(|i| (before + u64::from(i)) as u32))
+            .collect())
     }
 
     /// What the meshes' building drops or finds suspect, located (`meshes[0].triangles[4]: … has

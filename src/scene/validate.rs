@@ -294,6 +294,17 @@ impl Scene {
         }
         for (i, m) in self.meshes.iter().enumerate() {
             m.check(&format!("meshes[{i}]"), limits, &mut is);
+            match m.pinned_to {
+                Some(b) if b >= self.bodies.len() => is.push(
+                    format!("meshes[{i}].pinned_to"),
+                    format!("body {b} does not exist ({} bodies)", self.bodies.len()),
+                ),
+                Some(_) if m.pins.is_empty() => is.push(
+                    format!("meshes[{i}].pinned_to"),
+                    "the mesh has no pins to hang on the body; give `pins`",
+                ),
+                _ => {}
+            }
         }
         self.validate_props(&mut is);
         for (count, limit, what) in [

@@ -12,8 +12,10 @@
 //!   from its target's path it is put back on that sphere, its velocity away from the path's
 //!   point (relative to the point's own) removed.
 //!
-//! The energy audit books both on its attachments line: the change of `E` each move made,
-//! springs included ([`crate::EnergyAudit::attachments`]).
+//! The energy audit books both on its attachments line ([`crate::EnergyAudit::attachments`]):
+//! a pin's move as its work along the path over the substep (the mean of the change of `E` the
+//! move makes at the substep's start positions and at its end ones, springs included: second
+//! order in the step), a projection as the change of `E` it made.
 
 use super::*;
 use crate::audit;
@@ -32,6 +34,9 @@ pub(super) struct Drives {
     /// The frame's substeps and their length, set at its start.
     substeps: u32,
     dt: f64,
+    /// The substep's pin moves as the springs' start positions would take them (J): half of
+    /// each move's booked work (see [`Drives::begin_substep`]).
+    at_start: f64,
 }
 
 #[derive(Debug)]
@@ -83,10 +88,43 @@ impl Drives {
         }
     }
 
+    /// The path's point at share `s / substeps` of element `k` of `set`.
+    fn at(&self, set: &DriveSet, k: usize, s: u32) -> DVec3 {
+        let (from, to) = (set.pose[k], set.target[k]);
+        if s >= self.substeps {
+            to
+        } else {
+            from + (to - from) * (s as f64 / self.substeps as f64)
+        }
+    }
+
+    /// Before substep `s`'s springs move: the change of `E` each pin's move would make at the
+    /// substep's start positions. A pin's work is booked as the mean of that and the change the
+    /// move makes after the springs' step (a trapezoid over the substep, second order in the
+    /// step; the change after alone is first order: `../shared/MATH.md`'s audit books a
+    /// projection's change, but a driven pin is a force doing work along a path).
+    pub(super) fn begin_substep(&mut self, packed: &mut Packed, s: u32, gravity: DVec3) {
+        let mut start = 0.0;
+        for set in &self.sets {
+            for k in 0..set.index.len() {
+                let i = set.index[k];
+                if i == GONE || set.max_distance[k] != 0.0 {
+                    continue;
+                }
+                let i = i as usize;
+                let here = packed.x[i];
+                let before = audit::local_energy(packed, i, gravity);
+                packed.x[i] = self.at(set, k, s);
+                start += audit::local_energy(packed, i, gravity) - before;
+                packed.x[i] = here;
+            }
+        }
+        self.at_start = start;
+    }
+
     /// Substep `s` of the frame's (1-based): every element at its path's share `s / substeps`.
     pub(super) fn substep(&mut self, packed: &mut Packed, s: u32, gravity: DVec3) {
-        let share = s as f64 / self.substeps as f64;
-        let mut put_in = 0.0;
+        let (mut moved, mut projected) = (0.0, 0.0);
         for set in &self.sets {
             for k in 0..set.index.len() {
                 let i = set.index[k];
@@ -94,19 +132,14 @@ impl Drives {
                     continue;
                 }
                 let i = i as usize;
-                let (from, to) = (set.pose[k], set.target[k]);
-                let at = if s == self.substeps {
-                    to
-                } else {
-                    from + (to - from) * share
-                };
-                let vp = (to - from) / self.dt;
+                let at = self.at(set, k, s);
+                let vp = (set.target[k] - set.pose[k]) / self.dt;
                 let r = set.max_distance[k];
                 if r == 0.0 {
                     let before = audit::local_energy(packed, i, gravity);
                     packed.x[i] = at;
                     packed.v[i] = vp;
-                    put_in += audit::local_energy(packed, i, gravity) - before;
+                    moved += audit::local_energy(packed, i, gravity) - before;
                     continue;
                 }
                 let d = packed.x[i] - at;
@@ -121,10 +154,10 @@ impl Drives {
                 if away > 0.0 {
                     packed.v[i] -= away * n;
                 }
-                put_in += audit::local_energy(packed, i, gravity) - before;
+                projected += audit::local_energy(packed, i, gravity) - before;
             }
         }
-        self.energy += put_in;
+        self.energy += 0.5 * (self.at_start + moved) + projected;
     }
 
     /// The frame's end: the targets reached are where the next frame's paths start.

@@ -160,10 +160,15 @@ impl Run<'_> {
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
     #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
-        if stage.kind == StageKind::Drive && k == 0 {
+        if stage.kind == StageKind::Drive {
             if let Some(d) = self.drives.as_mut() {
-                d.begin_frame(self.packed, self.frame_substeps, h);
-                self.host_moved();
+                if k == 0 {
+                    d.begin_frame(self.packed, self.frame_substeps, h);
+                }
+                d.begin_substep(self.packed, k + 1, self.gravity);
+                if k == 0 {
+                    self.host_moved();
+                }
             }
             self.charge(StageKind::Drive);
         }

@@ -176,7 +176,9 @@ impl Simulation {
                 }
                 let f = &run.auditor.frame;
                 let before = run.auditor.run.residual;
-                let after = before + (e - f.start - f.edits - f.forces + f.damping);
+                // The drive stage's moves are booked at the frame's end (`book_frame`).
+                let driven = run.drives.as_ref().map_or(0.0, |d| d.energy);
+                let after = before + (e - f.start - f.edits - f.forces - driven + f.damping);
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
                     break e;
                 };
