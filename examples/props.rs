@@ -32,6 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Anchor::RightEdge,
         ],
         velocity: [0.0; 3],
+        air: None,
     });
     // Validation reports every problem with its location, as for a RON file.
     if let Some(issue) = scene.validate().first() {

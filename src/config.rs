@@ -185,6 +185,8 @@ pub struct SimConfig {
     pub auto_substeps: bool,
     /// Gravitational acceleration (m/s²).
     pub gravity: DVec3,
+    /// The wind the cloths with air feel ([`crate::Aero`]); still by default.
+    pub wind: crate::Wind,
     /// The integrator every substep uses.
     pub integrator: Integrator,
     /// Choose `integrator` from the springs at load (a scene that names none): the cheaper
@@ -232,6 +234,7 @@ impl Default for SimConfig {
             substeps: 1,
             auto_substeps: true,
             gravity: DVec3::new(0.0, -9.81, 0.0),
+            wind: crate::Wind::default(),
             integrator: Integrator::default(),
             auto_integrator: false,
             exact_displacement: false,
@@ -256,6 +259,7 @@ impl SimConfig {
         if self.substeps == 0 {
             return Err(SimError::NoSubsteps);
         }
+        self.wind.check().map_err(SimError::BadWind)?;
         if self.strain_limit.is_nan() || self.strain_limit <= 0.0 {
             return Err(SimError::BadStrainLimit(self.strain_limit));
         }

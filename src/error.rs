@@ -164,6 +164,10 @@ pub enum SimError {
     /// [`crate::ClothSprings`] despawned).
     #[error("no such cloth in this simulation (removed already?)")]
     UnknownCloth,
+    /// A wind ([`crate::SimConfig::wind`], [`crate::Simulation::set_wind`]) that is not finite,
+    /// or gusts without a length or period: the field is named.
+    #[error("wind: {0}")]
+    BadWind(String),
     /// The [`crate::DriveId`] names no drive of this simulation (removed already).
     #[error("no such drive in this simulation (removed already?)")]
     UnknownDrive,

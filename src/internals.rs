@@ -74,6 +74,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             bend: Some(spec(1e2)),
             pins: vec![Anchor::TopLeft, Anchor::TopRight],
             velocity: [0.0; 3],
+            air: None,
         }],
         ..Scene::new(1e-4)
     }

@@ -34,6 +34,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 #![warn(missing_docs)]
 
+pub mod air;
 mod audit;
 mod buffers;
 mod components;
@@ -59,6 +60,7 @@ pub mod math {
     #![doc = include_str!("integrate/MATH.md")]
 }
 
+pub use air::{Aero, Gust, Wind};
 pub use audit::EnergyAudit;
 pub use components::{
     ClothGrid, ClothSprings, GridLink, MeshSurface, Particle, Pin, Quarantined, SceneIndex, Spring,

@@ -123,4 +123,29 @@ fn stepping_allocates_nothing() {
         driven, 0,
         "set_drive_targets + step allocated {driven} times in 120 frames"
     );
+    // Air in a gusting wind: the air stage writes its forces in place.
+    let mut scene = harmonic::internals::hanging_cloth(24);
+    scene.cloths[0].air = Some(harmonic::Aero::default());
+    scene.wind = harmonic::Wind {
+        velocity: [6.0, 0.0, 1.0],
+        gust: Some(harmonic::Gust {
+            strength: 2.0,
+            length: 3.0,
+            period: 1.0,
+            seed: 1,
+        }),
+    };
+    scene.substeps = Some(4);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    assert!(sim.schedule().has(StageKind::Air));
+    sim.step().unwrap();
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..120 {
+        sim.step().unwrap();
+    }
+    let blown = ALLOCS.load(Ordering::Relaxed) - before;
+    assert_eq!(
+        blown, 0,
+        "the air stage allocated {blown} times in 120 frames"
+    );
 }

@@ -198,6 +198,9 @@ impl Builder {
             },
             links,
         },));
+        if let Some(aero) = c.air {
+            let _ = self.world.insert_one(e, aero);
+        }
         self.cloths.push(e);
     }
 
@@ -232,6 +235,9 @@ impl Builder {
             count: t.positions.len() as u32,
             triangles: t.triangles,
         },));
+        if let Some(aero) = m.air {
+            let _ = self.world.insert_one(e, aero);
+        }
         self.cloths.push(e);
     }
 
@@ -314,6 +320,7 @@ impl Scene {
                 substeps: self.substeps.unwrap_or(1),
                 auto_substeps: self.substeps.is_none(),
                 gravity: self.gravity.into(),
+                wind: self.wind,
                 integrator,
                 auto_integrator: self.integrator.is_none(),
                 exact_displacement: self.exact_displacement,

@@ -63,6 +63,9 @@ pub struct MeshCloth {
     /// Start velocity of every particle (m/s).
     #[serde(default)]
     pub velocity: V3,
+    /// Its aerodynamics (`(density, drag, lift)`); none: it feels no air.
+    #[serde(default)]
+    pub air: Option<crate::Aero>,
     /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
     /// read with its file; not written to a scene.
     #[serde(skip)]

@@ -193,6 +193,9 @@ pub struct Scene {
     /// Gravitational acceleration (m/s²); `(0, −9.81, 0)` when absent.
     #[serde(default = "default_gravity")]
     pub gravity: V3,
+    /// The wind the cloths with `air` feel; still when absent.
+    #[serde(default)]
+    pub wind: crate::Wind,
     /// Integrator name; when absent the engine chooses by rule, the cheaper within the
     /// tolerance of `symplectic-euler` and `harmonic` ([`crate::SimConfig::auto_integrator`]).
     #[serde(default)]
@@ -374,6 +377,9 @@ pub struct Cloth {
     /// Start velocity of every particle (m/s).
     #[serde(default)]
     pub velocity: V3,
+    /// Its aerodynamics (`(density, drag, lift)`); none: it feels no air.
+    #[serde(default)]
+    pub air: Option<crate::Aero>,
 }
 
 /// A rope or chain of equal particles from `start` to `end`.
@@ -410,6 +416,7 @@ impl Scene {
             dt,
             substeps: None,
             gravity: default_gravity(),
+            wind: crate::Wind::default(),
             integrator: None,
             backend: None,
             exact_displacement: false,

@@ -149,6 +149,9 @@ impl Scene {
             _ => {}
         }
         is.finite("gravity", self.gravity);
+        if let Err(e) = self.wind.check() {
+            is.push("wind", e);
+        }
         if let Some(name) = &self.integrator {
             if crate::RESEARCH_INTEGRATORS.contains(&name.as_str()) {
                 is.push(
@@ -235,6 +238,9 @@ impl Scene {
         }
         for (i, c) in self.cloths.iter().enumerate() {
             let at = format!("cloths[{i}]");
+            if let Some(Err(e)) = c.air.map(|a| a.check()) {
+                is.push(format!("{at}.air"), e);
+            }
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);
@@ -294,6 +300,9 @@ impl Scene {
         }
         for (i, m) in self.meshes.iter().enumerate() {
             m.check(&format!("meshes[{i}]"), limits, &mut is);
+            if let Some(Err(e)) = m.air.map(|a| a.check()) {
+                is.push(format!("meshes[{i}].air"), e);
+            }
             match m.pinned_to {
                 Some(b) if b >= self.bodies.len() => is.push(
                     format!("meshes[{i}].pinned_to"),

@@ -25,6 +25,10 @@ pub enum StageKind {
     /// Gravity: a uniform acceleration, summed into the external acceleration the integrate
     /// kernel reads where it adds forces (a constant: no pass of its own).
     Gravity,
+    /// Air on the cloths that have it ([`crate::Aero`]): once a frame, each triangle's drag and
+    /// lift at the frame's start state in the wind ([`crate::Wind`]), held over the substeps
+    /// as forces the force stage adds up (no pass of its own inside the substeps).
+    Air,
     /// The game's per-particle forces ([`crate::Simulation::set_forces`]): once a frame, `F/m`
     /// is added to gravity into one acceleration per particle, which the integrate kernel reads
     /// where it reads gravity (no pass of its own inside the substeps).
@@ -45,8 +49,9 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 6] = [
+    pub const ALL: [StageKind; 7] = [
         StageKind::Gravity,
+        StageKind::Air,
         StageKind::Forces,
         StageKind::Integrate,
         StageKind::Drive,
@@ -61,6 +66,7 @@ impl StageKind {
     pub fn name(self) -> &'static str {
         match self {
             StageKind::Gravity => "gravity",
+            StageKind::Air => "air",
             StageKind::Forces => "forces",
             StageKind::Integrate => "integrate",
             StageKind::Drive => "drive",
@@ -73,7 +79,7 @@ impl StageKind {
     pub fn cadence(self) -> Cadence {
         match self {
             StageKind::Gravity => Cadence::Fused,
-            StageKind::Forces => Cadence::Frame,
+            StageKind::Air | StageKind::Forces => Cadence::Frame,
             StageKind::Integrate
             | StageKind::Drive
             | StageKind::Contacts
@@ -84,7 +90,7 @@ impl StageKind {
     /// Where the stage sits against the integrate stage.
     pub fn place(self) -> Place {
         match self {
-            StageKind::Gravity | StageKind::Forces => Place::BeforeIntegrate,
+            StageKind::Gravity | StageKind::Air | StageKind::Forces => Place::BeforeIntegrate,
             StageKind::Integrate => Place::Integrate,
             StageKind::Drive | StageKind::Contacts | StageKind::Quarantine => Place::AfterIntegrate,
         }
@@ -94,6 +100,7 @@ impl StageKind {
     pub fn books(self) -> &'static str {
         match self {
             StageKind::Gravity => "potential energy (part of the energy itself)",
+            StageKind::Air => "forces: its work over the integrate stage's moves, with the game's",
             StageKind::Forces => "forces: their work over the integrate stage's moves",
             StageKind::Integrate => "damping: the dampers' loss",
             StageKind::Drive => {
@@ -169,6 +176,8 @@ pub(crate) struct Needs {
     pub(crate) forces: bool,
     /// The game drives particles.
     pub(crate) drives: bool,
+    /// Cloths feel air.
+    pub(crate) air: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -191,7 +200,10 @@ impl Schedule {
         if n.gravity {
             push(StageKind::Gravity, n.springs_on);
         }
-        if n.forces {
+        if n.air {
+            push(StageKind::Air, Backend::Cpu);
+        }
+        if n.forces || n.air {
             push(StageKind::Forces, n.springs_on);
         }
         push(StageKind::Integrate, n.springs_on);

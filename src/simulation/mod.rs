@@ -100,6 +100,8 @@ pub struct Simulation {
     forces: Option<forces::Forces>,
     /// Driven pins and motion constraints ([`Simulation::drive`]).
     drives: drive::Drives,
+    /// The cloths that feel air, and their triangles.
+    air: crate::air::AirSurfaces,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -244,6 +246,7 @@ impl Simulation {
             schedule: Schedule::default(),
             forces: None,
             drives: Default::default(),
+            air: Default::default(),
             timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
@@ -490,7 +493,8 @@ impl Simulation {
         };
         self.schedule.rebuild(Needs {
             gravity: self.config.gravity != DVec3::ZERO,
-            forces: self.forces.is_some(),
+            forces: self.forces.as_ref().is_some_and(|f| f.game()),
+            air: !self.air.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,
             substeps: self.config.substeps,

@@ -201,7 +201,7 @@ impl Run<'_> {
         match (stage.kind, stage.on) {
             // Fused: the integrate kernel reads them as its external acceleration (the force
             // stage's frame-start work is done before the substeps).
-            (StageKind::Gravity | StageKind::Forces, _) => {}
+            (StageKind::Gravity | StageKind::Air | StageKind::Forces, _) => {}
             (StageKind::Integrate, Backend::Gpu) => self.integrate_on_device(k, n)?,
             (StageKind::Integrate, _) => {
                 self.auditor.begin_substep(self.packed);
@@ -212,7 +212,7 @@ impl Run<'_> {
                 let loss = self.solver.grid_damper_loss();
                 self.auditor.damping(self.packed, self.law, h, loss);
                 if let Some(f) = self.forces {
-                    self.auditor.force_work(self.packed, &f.given);
+                    self.auditor.force_work(self.packed, &f.total);
                 }
                 self.charge_audit();
             }
@@ -281,7 +281,7 @@ impl Run<'_> {
             d.device_newer = false;
             self.charge_device();
             if let Some(f) = self.forces {
-                self.auditor.force_work(self.packed, &f.given);
+                self.auditor.force_work(self.packed, &f.total);
                 self.charge_audit();
             }
         }

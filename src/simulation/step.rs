@@ -70,6 +70,11 @@ impl Simulation {
         self.build_schedule(user.is_some());
         let t1 = Instant::now();
         self.open_books(edited);
+        // The air stage, once a frame, at the frame's start state (before the coupling borrows
+        // the bodies).
+        let t = (self.timers && !self.air.is_empty()).then(Instant::now);
+        self.blow();
+        let air_time = t.map(|t| t.elapsed());
         let open_time = if self.timers {
             t1.elapsed()
         } else {
@@ -107,6 +112,9 @@ impl Simulation {
         let mut times = crate::schedule::StageTimes::default();
         if let Some(t) = t {
             times[StageKind::Forces] = t.elapsed();
+        }
+        if let Some(t) = air_time {
+            times[StageKind::Air] = t;
         }
         #[cfg(feature = "gpu")]
         let device = self.gpu.as_mut().map(|gpu| run::Device {
@@ -407,6 +415,7 @@ impl Simulation {
         // only once the World is known to be sound (an error leaves them as they were).
         self.packed.regather(&self.world, options)?;
         self.drop_stale_forces();
+        self.gather_air();
         let parts = crate::metrics::energy_parts(&self.packed, self.config.gravity);
         self.energy_scale = parts.scale();
         self.energy_in_motion = parts.internal();

@@ -68,6 +68,7 @@ pub fn swinging_cloth(n: u32, stiffness: f64, throw: f64) -> Scene {
         bend: Some(spec(stiffness / 4.0, 0.2)),
         pins: vec![Anchor::TopLeft, Anchor::TopRight],
         velocity: [throw, 0.0, 0.0],
+        air: None,
     }];
     s
 }

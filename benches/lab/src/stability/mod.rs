@@ -169,6 +169,7 @@ pub fn cloth(n: u32, zeta: f64) -> Scene {
         bend: Some(spec(2000.0, zeta)),
         pins: vec![Anchor::TopLeft, Anchor::TopRight],
         velocity: [0.0; 3],
+        air: None,
     }];
     s
 }
