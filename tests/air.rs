@@ -206,3 +206,47 @@ fn bad_air_and_wind_are_refused_by_name() {
         "the new wind blows"
     );
 }
+
+/// The windy flag in a steady 6 m/s wind (its gusts taken off) streams downwind and flutters:
+/// the fly end's free corner swings across the wind at a steady frequency, reported.
+#[test]
+fn a_flag_in_a_steady_wind_streams_and_flutters() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut scene = Scene::load(root.join("scenes/windy_flag.ron")).unwrap();
+    scene.wind.gust = None;
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let (cols, rows) = (32, 20);
+    let corner = (rows - 1) * cols + cols - 1;
+    let dt = scene.dt;
+    for _ in 0..60 {
+        sim.step().unwrap();
+    }
+    let mut z = Vec::new();
+    let mut x = 0.0;
+    let frames = 240;
+    for _ in 0..frames {
+        sim.step().unwrap();
+        let p = sim.positions()[corner];
+        z.push(p.z);
+        x += p.x / frames as f64;
+    }
+    let mean = z.iter().sum::<f64>() / z.len() as f64;
+    let swing = (z.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / z.len() as f64).sqrt();
+    let crossings = z
+        .windows(2)
+        .filter(|w| (w[0] - mean).signum() != (w[1] - mean).signum())
+        .count();
+    let frequency = crossings as f64 / 2.0 / (frames as f64 * dt);
+    let tail = &z[z.len() - 60..];
+    let late = (tail.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 60.0).sqrt();
+    println!(
+        "fly corner: mean x {x:.3} m, swing {swing:.4} m rms across the wind ({late:.4} m in the last second), flutter {frequency:.2} Hz"
+    );
+    assert!(
+        late > 0.3 * swing,
+        "the flutter dies away: {late} m rms at the end"
+    );
+    assert!(x > 0.7, "the flag streams downwind: the corner at x = {x}");
+    assert!(swing > 0.005, "it flutters: {swing} m rms");
+    assert!((0.5..15.0).contains(&frequency), "{frequency} Hz");
+}

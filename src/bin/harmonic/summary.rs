@@ -101,8 +101,8 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     format!(
         "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
          damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, quarantine {:.4e} J; \
-         attachments put in {:.4e} J, edits {:.4e} J; its passes took {seconds:.3} s ({} % of \
-         integrate, where the grid pass books its dampers)",
+         attachments put in {:.4e} J, forces and air {:.4e} J, edits {:.4e} J; its passes took \
+         {seconds:.3} s ({} % of integrate, where the grid pass books its dampers)",
         a.residual,
         share(a.residual),
         a.peak_residual,
@@ -112,6 +112,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
         a.friction,
         a.quarantine,
         a.attachments,
+        a.forces,
         a.edits,
         Readable::new(100.0 * seconds / integrate.max(1e-12), 1)
     )
