@@ -52,7 +52,10 @@ pub struct EnergyAudit {
     /// Dissipated by the springs' dampers (≥ 0 for dampers with `c ≥ 0`).
     pub damping: f64,
     /// Removed by the contacts' push-out and their normal velocity change (work by a moving
-    /// collider included; a restitution `e` keeps `e²` of the approach's energy).
+    /// collider included; a restitution `e` keeps `e²` of the approach's energy). Where the
+    /// contacts run on the device, the work the colliders' motion does on the cloth, read from
+    /// the impulses the contacts hand the bodies (`−(J·v + L·ω)`): the contacts' own
+    /// dissipation is then left in the residual, where it is negative.
     pub contacts: f64,
     /// Removed by friction (the tangential velocity change against the collider).
     pub friction: f64,

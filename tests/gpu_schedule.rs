@@ -176,3 +176,39 @@ fn the_device_times_each_stage_where_it_has_timestamps() {
         assert_eq!(sim.step().unwrap().device_stages, None, "{name}");
     }
 }
+
+/// The device's contacts book the work their colliders' motion does on the cloth: the ball
+/// dropped on the trampoline puts energy in on both back ends (a negative contacts line), and
+/// the device's run is not mistaken for a step making energy (the residual the books leave is
+/// the contacts' own dissipation, negative).
+#[test]
+fn device_contacts_book_the_work_of_moving_bodies() {
+    let Some(_ctx) = context() else {
+        return;
+    };
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let scene = Scene::load(root.join("scenes/trampoline.ron")).unwrap();
+    let run = |backend: Backend| {
+        let built = scene.build();
+        let config = SimConfig {
+            backend,
+            ..built.config
+        };
+        let mut sim = Simulation::with_props(built.world, config, built.props).unwrap();
+        for _ in 0..60 {
+            sim.step().unwrap();
+        }
+        (sim.contacts_on_gpu(), sim.diagnostics())
+    };
+    let (on_gpu, gpu) = run(Backend::Gpu);
+    let (_, cpu) = run(Backend::Cpu);
+    println!("CPU: {:?}\nGPU: {:?}", cpu.audit, gpu.audit);
+    assert!(on_gpu, "the trampoline's contacts run on the device");
+    assert!(cpu.audit.contacts < 0.0 && gpu.audit.contacts < 0.0);
+    assert!(gpu.failure.is_none(), "{:?}", gpu.failure);
+    assert!(
+        gpu.audit.relative_peak() < 0.01,
+        "peak {}",
+        gpu.audit.relative_peak()
+    );
+}

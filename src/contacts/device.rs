@@ -85,6 +85,18 @@ impl Props {
                     support_torque: v(p.support_torque),
                 });
             }
+            // The work the collider's motion did on the cloth, `−(J·v + L·ω)` with `J`, `L` the
+            // impulse and angular impulse on the body about its centre of mass: what the books
+            // can read of the device's contacts (their own dissipation is left in the residual,
+            // where it is negative).
+            let k = total.supports.max(1) as f64;
+            let (j, l) = (
+                total.impulse + total.support / k,
+                total.torque + total.support_torque / k,
+            );
+            if total.contacts > 0 {
+                stage.energy.contacts += j.dot(cand.lin) + l.dot(cand.ang);
+            }
             let body = cand.body.filter(|_| cand.dynamic);
             apply(&mut stage.stats, &mut self.physics.bodies, body, &total);
         }
