@@ -497,22 +497,7 @@ impl super::Scene {
                 mesh.vertices.len()
             ));
         }
-        let before_meshes = self.particles.len() as u64
-            + (self.cloths.iter())
-                .map(|c| u64::from(c.resolution.0) * u64::from(c.resolution.1))
-                .sum::<u64>()
-            + self
-                .ropes
-                .iter()
-                .map(|r| u64::from(r.particles))
-                .sum::<u64>();
-        let mut before = before_meshes;
-        for earlier in &self.meshes[..m] {
-            if !sound(earlier) {
-                return Err(format!("an earlier mesh than {m} is not sound"));
-            }
-            before += earlier.topology("").positions.len() as u64;
-        }
+        let before = self.particles_before(m)?;
         let Some(i) = mesh.topology("").particle_of[v as usize] else {
             return Err(format!("vertex {v} of mesh {m} is in no triangle"));
         };
@@ -525,20 +510,36 @@ impl super::Scene {
     /// and [`crate::Simulation::positions`] count them. For a scene that passed validation.
     pub fn mesh_particles(&self, m: usize) -> Result<Vec<Option<u32>>, String> {
         let mesh = (self.meshes.get(m)).ok_or_else(|| format!("mesh {m} does not exist"))?;
-        let before = self.particles.len() as u64
+        let before = self.particles_before(m)?;
+        let t = mesh.topology("");
+        Ok((t.particle_of.iter())
+            .map(|p| p.map(|i| (before + u64::from(i)) as u32))
+            .collect())
+    }
+
+    /// The particles the scene builds before mesh `m`'s (explicit, cloths, ropes, earlier
+    /// meshes), or why they cannot be counted (an earlier mesh with indices out of range).
+    fn particles_before(&self, m: usize) -> Result<u64, String> {
+        let mut before = self.particles.len() as u64
             + (self.cloths.iter())
                 .map(|c| u64::from(c.resolution.0) * u64::from(c.resolution.1))
                 .sum::<u64>()
             + (self.ropes.iter())
                 .map(|r| u64::from(r.particles))
-                .sum::<u64>()
-            + (self.meshes[..m].iter())
-                .map(|e| e.topology("").positions.len() as u64)
                 .sum::<u64>();
-        let t = mesh.topology("");
-        Ok((t.particle_of.iter())
-            .map(|p| p.map(|i| (before + u64::from(i)) as u32))
-            .collect())
+        for earlier in &self.meshes[..m] {
+            let n = earlier.vertices.len();
+            if !earlier
+                .triangles
+                .iter()
+                .flatten()
+                .all(|&i| (i as usize) < n)
+            {
+                return Err(format!("an earlier mesh than {m} is not sound"));
+            }
+            before += earlier.topology("").positions.len() as u64;
+        }
+        Ok(before)
     }
 
     /// What the meshes' building drops or finds suspect, located (`meshes[0].triangles[4]: … has
