@@ -55,7 +55,8 @@ pub struct EnergyAudit {
     /// collider included; a restitution `e` keeps `e²` of the approach's energy). Where the
     /// contacts run on the device, the work the colliders' motion does on the cloth, read from
     /// the impulses the contacts hand the bodies (`−(J·v + L·ω)`): the contacts' own
-    /// dissipation is then left in the residual, where it is negative.
+    /// dissipation is then left in the residual, where it is negative. The tethers' projections
+    /// are booked here too.
     pub contacts: f64,
     /// Removed by friction (the tangential velocity change against the collider).
     pub friction: f64,

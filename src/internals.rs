@@ -75,6 +75,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             pins: vec![Anchor::TopLeft, Anchor::TopRight],
             velocity: [0.0; 3],
             air: None,
+            tethers: None,
         }],
         ..Scene::new(1e-4)
     }

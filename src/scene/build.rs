@@ -44,14 +44,34 @@ impl BuiltScene {
 /// numbered from scene index `first`; returns the [`ClothSprings`] entity. The cloth must have
 /// passed validation.
 pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Entity {
-    spawn(world, first, |b| b.cloth(cloth))
+    let e = spawn(world, first, |b| b.cloth(cloth));
+    tie(world, e, cloth.tethers);
+    e
 }
 
 /// Spawns `mesh` into `world` (its particles, springs and one [`MeshSurface`]) with its
 /// particles numbered from scene index `first`; returns the [`MeshSurface`] entity. The mesh
 /// must have passed validation.
 pub fn spawn_mesh(world: &mut World, first: u32, mesh: &MeshCloth) -> Entity {
-    spawn(world, first, |b| b.mesh(mesh, "mesh"))
+    let e = spawn(world, first, |b| b.mesh(mesh, "mesh"));
+    tie(world, e, mesh.tethers);
+    e
+}
+
+/// The tethers `spec` asks for on the cloth (or mesh) entity `e`, from its particles' places
+/// and pins as they are (its rest shape, once its pins and attachments are set).
+fn tie(world: &mut World, e: Entity, spec: Option<crate::TetherSpec>) {
+    let Some(spec) = spec else {
+        return;
+    };
+    let range = match (world.get::<&ClothSprings>(e), world.get::<&MeshSurface>(e)) {
+        (Ok(c), _) => (c.grid.first, (c.grid.cols * c.grid.rows)),
+        (_, Ok(m)) => (m.first, m.count),
+        _ => return,
+    };
+    if let Some(t) = crate::tether::build(world, range.0, range.1, &spec) {
+        let _ = world.insert_one(e, t);
+    }
 }
 
 fn spawn(world: &mut World, first: u32, part: impl FnOnce(&mut Builder)) -> Entity {
@@ -311,6 +331,11 @@ impl Scene {
             .and_then(|n| n.parse::<Integrator>().ok())
             .unwrap_or_default();
         let props = self.build_props(&mut b.world, &b.hung);
+        let specs =
+            (self.cloths.iter().map(|c| c.tethers)).chain(self.meshes.iter().map(|m| m.tethers));
+        for (&e, spec) in b.cloths.iter().zip(specs) {
+            tie(&mut b.world, e, spec);
+        }
         BuiltScene {
             props,
             cloths: b.cloths,

@@ -66,6 +66,9 @@ pub struct MeshCloth {
     /// Its aerodynamics (`(density, drag, lift)`); none: it feels no air.
     #[serde(default)]
     pub air: Option<crate::Aero>,
+    /// Tethers from its pinned or attached particles (`(slack, anchors)`); none: no tethers.
+    #[serde(default)]
+    pub tethers: Option<crate::TetherSpec>,
     /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
     /// read with its file; not written to a scene.
     #[serde(skip)]

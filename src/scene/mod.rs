@@ -380,6 +380,9 @@ pub struct Cloth {
     /// Its aerodynamics (`(density, drag, lift)`); none: it feels no air.
     #[serde(default)]
     pub air: Option<crate::Aero>,
+    /// Tethers from its pinned particles (`(slack, anchors)`); none: no tethers.
+    #[serde(default)]
+    pub tethers: Option<crate::TetherSpec>,
 }
 
 /// A rope or chain of equal particles from `start` to `end`.

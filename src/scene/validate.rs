@@ -241,6 +241,9 @@ impl Scene {
             if let Some(Err(e)) = c.air.map(|a| a.check()) {
                 is.push(format!("{at}.air"), e);
             }
+            if let Some(Err(e)) = c.tethers.map(|t| t.check()) {
+                is.push(format!("{at}.tethers"), e);
+            }
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);
@@ -302,6 +305,9 @@ impl Scene {
             m.check(&format!("meshes[{i}]"), limits, &mut is);
             if let Some(Err(e)) = m.air.map(|a| a.check()) {
                 is.push(format!("meshes[{i}].air"), e);
+            }
+            if let Some(Err(e)) = m.tethers.map(|t| t.check()) {
+                is.push(format!("meshes[{i}].tethers"), e);
             }
             match m.pinned_to {
                 Some(b) if b >= self.bodies.len() => is.push(

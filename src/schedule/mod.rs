@@ -38,6 +38,9 @@ pub enum StageKind {
     /// Driven pins moved along their paths to the game's targets, and particles kept within
     /// their maximum distance of them ([`crate::Simulation::drive`]), a share every substep.
     Drive,
+    /// Tethers ([`crate::Tethers`]): particles further than their limit from an anchor put
+    /// back, their velocity away from it removed.
+    Tethers,
     /// Rigid bodies (the scene's own rapier world or the caller's sets): attached particles
     /// follow their bodies, then particles are pushed out of colliders with friction and the
     /// dynamic bodies get the opposite impulses.
@@ -49,12 +52,13 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 7] = [
+    pub const ALL: [StageKind; 8] = [
         StageKind::Gravity,
         StageKind::Air,
         StageKind::Forces,
         StageKind::Integrate,
         StageKind::Drive,
+        StageKind::Tethers,
         StageKind::Contacts,
         StageKind::Quarantine,
     ];
@@ -70,6 +74,7 @@ impl StageKind {
             StageKind::Forces => "forces",
             StageKind::Integrate => "integrate",
             StageKind::Drive => "drive",
+            StageKind::Tethers => "tethers",
             StageKind::Contacts => "contacts",
             StageKind::Quarantine => "quarantine",
         }
@@ -82,6 +87,7 @@ impl StageKind {
             StageKind::Air | StageKind::Forces => Cadence::Frame,
             StageKind::Integrate
             | StageKind::Drive
+            | StageKind::Tethers
             | StageKind::Contacts
             | StageKind::Quarantine => Cadence::Substep,
         }
@@ -92,7 +98,9 @@ impl StageKind {
         match self {
             StageKind::Gravity | StageKind::Air | StageKind::Forces => Place::BeforeIntegrate,
             StageKind::Integrate => Place::Integrate,
-            StageKind::Drive | StageKind::Contacts | StageKind::Quarantine => Place::AfterIntegrate,
+            StageKind::Drive | StageKind::Tethers | StageKind::Contacts | StageKind::Quarantine => {
+                Place::AfterIntegrate
+            }
         }
     }
 
@@ -106,6 +114,7 @@ impl StageKind {
             StageKind::Drive => {
                 "attachments: the driven pins' moves and the maximum distances' projections"
             }
+            StageKind::Tethers => "contacts: the change of E its projections made",
             StageKind::Contacts => "attachments, contacts and friction: its projections",
             StageKind::Quarantine => "quarantine: the energy of the particles it froze",
         }
@@ -154,7 +163,11 @@ impl Stage {
     /// whose springs run on the device (the state then goes back and forth every substep). The
     /// quarantine only checks the state where it is on the host anyway.
     pub fn needs_host_state(&self) -> bool {
-        self.on == Backend::Cpu && matches!(self.kind, StageKind::Drive | StageKind::Contacts)
+        self.on == Backend::Cpu
+            && matches!(
+                self.kind,
+                StageKind::Drive | StageKind::Tethers | StageKind::Contacts
+            )
     }
 }
 
@@ -178,6 +191,8 @@ pub(crate) struct Needs {
     pub(crate) drives: bool,
     /// Cloths feel air.
     pub(crate) air: bool,
+    /// Cloths have tethers.
+    pub(crate) tethers: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -209,6 +224,9 @@ impl Schedule {
         push(StageKind::Integrate, n.springs_on);
         if n.drives {
             push(StageKind::Drive, Backend::Cpu);
+        }
+        if n.tethers {
+            push(StageKind::Tethers, Backend::Cpu);
         }
         if let Some(on) = n.contacts_on {
             push(StageKind::Contacts, on);

@@ -102,6 +102,8 @@ pub struct Simulation {
     drives: drive::Drives,
     /// The cloths that feel air, and their triangles.
     air: crate::air::AirSurfaces,
+    /// The cloths' tethers, in packed indices.
+    tethers: crate::tether::TetherStage,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -247,6 +249,7 @@ impl Simulation {
             forces: None,
             drives: Default::default(),
             air: Default::default(),
+            tethers: Default::default(),
             timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
@@ -495,6 +498,7 @@ impl Simulation {
             gravity: self.config.gravity != DVec3::ZERO,
             forces: self.forces.as_ref().is_some_and(|f| f.game()),
             air: !self.air.is_empty(),
+            tethers: !self.tethers.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,
             substeps: self.config.substeps,

@@ -71,6 +71,7 @@ impl Simulation {
             && self.props.is_none()
             && self.user_stage.is_none()
             && self.drives.is_empty()
+            && self.tethers.is_empty()
             && self.steps.is_multiple_of(CHECK_EVERY)
             && !self.packed.x.is_empty()
     }

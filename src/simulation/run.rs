@@ -21,6 +21,8 @@ pub(super) struct Run<'a> {
     pub(super) forces: Option<&'a super::forces::Forces>,
     /// The drives, when the drive stage is listed.
     pub(super) drives: Option<&'a mut super::drive::Drives>,
+    /// The tethers, when their stage is listed.
+    pub(super) tethers: Option<&'a mut crate::tether::TetherStage>,
     pub(super) gravity: DVec3,
     /// The frame's substeps (a retry's, once it runs).
     pub(super) frame_substeps: u32,
@@ -150,6 +152,9 @@ impl Run<'_> {
         if let Some(d) = &self.drives {
             self.auditor.book(Line::Attachments, d.energy);
         }
+        if let Some(t) = &self.tethers {
+            self.auditor.book(Line::Contacts, -t.energy);
+        }
         if let Some(c) = self.coupling.as_mut() {
             for (line, joules) in c.stage().energy.lines() {
                 self.auditor.book(line, joules);
@@ -160,6 +165,9 @@ impl Run<'_> {
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
     #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
+        if let (StageKind::Tethers, 0, Some(t)) = (stage.kind, k, self.tethers.as_mut()) {
+            t.energy = 0.0;
+        }
         if stage.kind == StageKind::Drive {
             if let Some(d) = self.drives.as_mut() {
                 if k == 0 {
@@ -223,6 +231,14 @@ impl Run<'_> {
                 }
                 self.host_moved();
                 self.charge(StageKind::Drive);
+            }
+            (StageKind::Tethers, _) => {
+                self.state_to_host()?;
+                if let Some(t) = self.tethers.as_mut() {
+                    t.project(self.packed, self.gravity);
+                }
+                self.host_moved();
+                self.charge(StageKind::Tethers);
             }
             (StageKind::Contacts, Backend::Gpu) => self.device_contacts(k, n)?,
             (StageKind::Contacts, _) => {

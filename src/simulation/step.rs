@@ -143,6 +143,7 @@ impl Simulation {
             schedule: &self.schedule,
             forces,
             drives: (!self.drives.is_empty()).then_some(&mut self.drives),
+            tethers: (!self.tethers.is_empty()).then_some(&mut self.tethers),
             gravity: self.config.gravity,
             frame_substeps: 0,
             packed: &mut self.packed,
@@ -186,7 +187,8 @@ impl Simulation {
                 let before = run.auditor.run.residual;
                 // The drive stage's moves are booked at the frame's end (`book_frame`).
                 let driven = run.drives.as_ref().map_or(0.0, |d| d.energy);
-                let after = before + (e - f.start - f.edits - f.forces - driven + f.damping);
+                let tied = run.tethers.as_ref().map_or(0.0, |t| t.energy);
+                let after = before + (e - f.start - f.edits - f.forces - driven - tied + f.damping);
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
                     break e;
                 };
@@ -443,6 +445,7 @@ impl Simulation {
             self.packed.regather(&self.world, options)?;
         }
         self.drives.refresh(&self.packed);
+        self.tethers.gather(&self.world, &self.packed);
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.estimate_network();

@@ -69,6 +69,7 @@ pub fn swinging_cloth(n: u32, stiffness: f64, throw: f64) -> Scene {
         pins: vec![Anchor::TopLeft, Anchor::TopRight],
         velocity: [throw, 0.0, 0.0],
         air: None,
+        tethers: None,
     }];
     s
 }

@@ -170,6 +170,7 @@ pub fn cloth(n: u32, zeta: f64) -> Scene {
         pins: vec![Anchor::TopLeft, Anchor::TopRight],
         velocity: [0.0; 3],
         air: None,
+        tethers: None,
     }];
     s
 }

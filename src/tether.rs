@@ -1,0 +1,167 @@
+//! Tethers (long-range attachments): each free particle of a cloth held within `(1 + slack)`
+//! times its rest distance of its nearest anchors (the cloth's pinned or attached particles),
+//! so a soft cloth hanging from a few points does not stretch without bound (Jolt's and
+//! Chaos's long-range attachments, NvCloth's tethers).
+//!
+//! The rest distances are Euclidean, taken where the cloth is built (its rest shape): a lower
+//! bound of the geodesic one along the cloth, so a tether never holds a particle closer than
+//! the cloth itself would. After the spring step a particle further than its limit from an
+//! anchor is put back on that sphere, and its velocity away from the anchor, relative to the
+//! anchor's own, removed; the audit books the change of `E` each projection made
+//! ([`crate::EnergyAudit::contacts`], with the other projections that only remove energy).
+
+use glam::DVec3;
+use hecs::{Entity, World};
+use serde::{Deserialize, Serialize};
+
+use crate::buffers::Packed;
+use crate::components::{Particle, Pin, SceneIndex};
+
+/// A cloth's tethers, as a scene gives them (`tethers: Some((slack: 0.1, anchors: 1))`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TetherSpec {
+    /// How far past its rest distance a particle may go, as a share of it (0.1: 10 %).
+    #[serde(default = "default_slack")]
+    pub slack: f64,
+    /// Anchors per particle, its nearest (1 to 4; one leaves the seam between two anchors free
+    /// to sag, more hold it).
+    #[serde(default = "one")]
+    pub anchors: u32,
+}
+
+fn default_slack() -> f64 {
+    0.1
+}
+
+fn one() -> u32 {
+    1
+}
+
+impl Default for TetherSpec {
+    fn default() -> Self {
+        TetherSpec {
+            slack: default_slack(),
+            anchors: 1,
+        }
+    }
+}
+
+impl TetherSpec {
+    /// What a cloth's tethers must be: a slack finite and ≥ 0, 1 to 4 anchors.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.slack.is_finite() && self.slack >= 0.0) {
+            return Err(format!(
+                "slack must be finite and ≥ 0, got {:?}",
+                self.slack
+            ));
+        }
+        if !(1..=4).contains(&self.anchors) {
+            return Err(format!("anchors must be 1 to 4, got {}", self.anchors));
+        }
+        Ok(())
+    }
+}
+
+/// A tether: `(particle, anchor, limit m)`, the particle held within `limit` of the anchor.
+pub type Link = (u32, u32, f64);
+
+/// A cloth's tethers (a component on its cloth entity): for each free particle its nearest
+/// anchors and the longest it may be from each, as offsets from the cloth's first particle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Tethers {
+    /// The cloth's first particle (scene index).
+    pub first: u32,
+    /// Its tethers, particles and anchors as offsets from `first`.
+    pub links: Vec<Link>,
+}
+
+/// The tethers of the cloth whose particles are scene indices `first .. first + count` in
+/// `world`, for `spec`: every particle neither pinned nor attached tied to its nearest anchors
+/// where they are now (the rest shape). None where the cloth has no anchor.
+pub fn build(world: &World, first: u32, count: u32, spec: &TetherSpec) -> Option<Tethers> {
+    let mut parts: Vec<(u32, DVec3, bool)> = world
+        .query::<(Entity, &SceneIndex, &Particle)>()
+        .iter()
+        .filter(|(_, i, _)| (first..first + count).contains(&i.0))
+        .map(|(e, i, p)| {
+            let held = world.get::<&Pin>(e).is_ok()
+                || world.get::<&crate::contacts::Attachment>(e).is_ok();
+            (i.0 - first, p.position, held)
+        })
+        .collect();
+    parts.sort_unstable_by_key(|p| p.0);
+    let anchors: Vec<(u32, DVec3)> = parts.iter().filter(|p| p.2).map(|p| (p.0, p.1)).collect();
+    if anchors.is_empty() {
+        return None;
+    }
+    let k = (spec.anchors as usize).min(anchors.len());
+    let mut links = Vec::new();
+    let mut near: Vec<(f64, u32)> = Vec::with_capacity(anchors.len());
+    for &(i, x, held) in &parts {
+        if held {
+            continue;
+        }
+        near.clear();
+        near.extend(anchors.iter().map(|&(a, y)| ((x - y).length(), a)));
+        near.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let nearest = &mut near[..k];
+        nearest.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        links.extend(nearest.iter().map(|&(d, a)| (i, a, d * (1.0 + spec.slack))));
+    }
+    Some(Tethers { first, links })
+}
+
+/// The simulation's tethers in packed indices, and what their projections did this frame.
+#[derive(Debug, Default)]
+pub(crate) struct TetherStage {
+    links: Vec<Link>,
+    /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
+    pub(crate) energy: f64,
+}
+
+impl TetherStage {
+    /// Every cloth's tethers from `world`, in packed indices.
+    pub(crate) fn gather(&mut self, world: &World, packed: &Packed) {
+        self.links.clear();
+        let mut cloths: Vec<(u32, Vec<Link>)> = world
+            .query::<&Tethers>()
+            .iter()
+            .map(|t| (t.first, t.links.clone()))
+            .collect();
+        cloths.sort_unstable_by_key(|c| c.0);
+        let n = packed.particle_count() as u32;
+        for (first, links) in cloths {
+            self.links.extend(
+                (links.into_iter())
+                    .map(|(i, a, d)| (first + i, first + a, d))
+                    .filter(|&(i, a, _)| i < n && a < n),
+            );
+        }
+    }
+
+    pub(crate) fn is_empty(&self) -> bool {
+        self.links.is_empty()
+    }
+
+    /// After a substep's springs: every particle further than its limit from an anchor put
+    /// back on the sphere, its velocity away from the anchor (relative to the anchor's) removed.
+    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) {
+        for &(i, a, limit) in &self.links {
+            let (i, a) = (i as usize, a as usize);
+            let d = packed.x[i] - packed.x[a];
+            let len = d.length();
+            if len <= limit || !len.is_finite() || packed.inv_mass[i] == 0.0 {
+                continue;
+            }
+            let before = crate::audit::local_energy(packed, i, gravity);
+            let n = d / len;
+            packed.x[i] = packed.x[a] + n * limit;
+            let away = (packed.v[i] - packed.v[a]).dot(n);
+            if away > 0.0 {
+                packed.v[i] -= away * n;
+            }
+            self.energy += crate::audit::local_energy(packed, i, gravity) - before;
+        }
+    }
+}

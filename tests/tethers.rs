@@ -1,0 +1,166 @@
+//! Tethers (`tethers:` per cloth): each free particle held within `(1 + slack)` of its rest
+//! distance to its nearest anchors, checked against that distance measured here from the
+//! cloth's start, on both back ends.
+
+use harmonic::prelude::*;
+use harmonic::StageKind;
+
+mod common;
+
+/// A soft 16×16 cloth of 1 m hanging from its top corners, with `tethers` (RON) if given.
+fn soft_cloth(tethers: &str, backend: &str) -> Scene {
+    cloth(6.0, tethers, backend)
+}
+
+/// The 16×16 cloth with springs of `hz`.
+fn cloth(hz: f64, tethers: &str, backend: &str) -> Scene {
+    Scene::parse(
+        &format!(
+            "Scene(dt: 0.016666666666666666, substeps: 8, integrator: \"symplectic-euler\", backend: \"{backend}\",
+              cloths: [(origin: (-0.5, 1.0, 0.0), size: (1.0, 1.0), resolution: (16, 16), mass: 0.5,
+                structural: (frequency: {hz}, damping_ratio: 0.2), shear: Some((frequency: {hz}, damping_ratio: 0.2)),
+                pins: [TopLeft, TopRight] {tethers})])"
+        ),
+        "soft.ron",
+    )
+    .unwrap()
+}
+
+/// The worst ratio, over the free particles, of the distance to the nearer pin over its rest
+/// distance, for particles at `x` that started at `start` (pins 0 and 15).
+fn worst_ratio(start: &[DVec3], x: &[DVec3]) -> f64 {
+    let pins = [0, 15];
+    (0..x.len())
+        .filter(|i| !pins.contains(i))
+        .map(|i| {
+            let p = pins
+                .iter()
+                .copied()
+                .min_by(|&a, &b| {
+                    let (da, db) = (
+                        (start[i] - start[a]).length(),
+                        (start[i] - start[b]).length(),
+                    );
+                    da.total_cmp(&db).then(a.cmp(&b))
+                })
+                .unwrap();
+            (x[i] - x[p]).length() / (start[i] - start[p]).length()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Without tethers the soft cloth stretches to 18× its rest distances from the pins; with
+/// them (slack 0.1, the nearest pin) no particle ends a frame further than 1.1× from it, on
+/// either back end, and the projections only take energy out (booked with the contacts).
+#[test]
+fn tethers_hold_a_soft_cloth_to_its_slack() {
+    let mut free = Simulation::from_scene(&soft_cloth("", "cpu")).unwrap();
+    assert!(!free.schedule().has(StageKind::Tethers));
+    let start = free.positions().to_vec();
+    let mut loose: f64 = 0.0;
+    for _ in 0..120 {
+        free.step().unwrap();
+        loose = loose.max(worst_ratio(&start, free.positions()));
+    }
+    println!("untethered: up to {loose:.3}× the rest distance from the nearer pin");
+    assert!(loose > 1.5, "the soft cloth should stretch: {loose}");
+    for backend in ["cpu", "gpu"] {
+        if backend == "gpu"
+            && common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)).is_none()
+        {
+            continue;
+        }
+        let scene = soft_cloth(", tethers: Some((slack: 0.1, anchors: 1))", backend);
+        let mut sim = Simulation::from_scene(&scene).unwrap();
+        assert!(sim.schedule().has(StageKind::Tethers), "{}", sim.schedule());
+        let mut worst: f64 = 0.0;
+        for _ in 0..120 {
+            sim.step().unwrap();
+            worst = worst.max(worst_ratio(&start, sim.positions()));
+        }
+        let a = sim.diagnostics().audit;
+        println!(
+            "{backend}: tethered up to {worst:.6}×; the tethers took {:.4e} J",
+            a.contacts
+        );
+        let tol = if backend == "gpu" { 1e-5 } else { 1e-12 };
+        assert!(worst <= 1.1 + tol, "{backend}: {worst}× the rest distance");
+        assert!(
+            worst > 1.09,
+            "{backend}: the tethers hold at their slack, {worst}"
+        );
+        assert!(a.contacts > 0.0, "{backend}: projections take energy out");
+        assert!(sim.diagnostics().failure.is_none());
+    }
+}
+
+/// Tethers that never reach their limit change nothing: the same trajectory, bit for bit.
+#[test]
+fn slack_tethers_change_nothing() {
+    let mut free = Simulation::from_scene(&cloth(30.0, "", "cpu")).unwrap();
+    let tethers = ", tethers: Some((slack: 2.0, anchors: 2))";
+    let mut slack = Simulation::from_scene(&cloth(30.0, tethers, "cpu")).unwrap();
+    let start = free.positions().to_vec();
+    let mut loose: f64 = 0.0;
+    for _ in 0..60 {
+        free.step().unwrap();
+        slack.step().unwrap();
+        loose = loose.max(worst_ratio(&start, free.positions()));
+    }
+    assert!(
+        loose < 3.0,
+        "the stiffer cloth stays within the slack: {loose}"
+    );
+    assert!(slack.schedule().has(StageKind::Tethers));
+    assert_eq!(free.positions(), slack.positions());
+    assert_eq!(free.velocities(), slack.velocities());
+}
+
+#[test]
+fn bad_tethers_are_refused_by_name() {
+    for (t, want) in [
+        (
+            "(slack: -0.1)",
+            "cloths[0].tethers: slack must be finite and ≥ 0, got -0.1",
+        ),
+        (
+            "(anchors: 5)",
+            "cloths[0].tethers: anchors must be 1 to 4, got 5",
+        ),
+    ] {
+        let text = format!(
+            "Scene(dt: 0.01, cloths: [(origin: (0.0, 1.0, 0.0), size: (1.0, 1.0), resolution: (4, 4),
+              mass: 0.1, structural: (frequency: 5.0), pins: [TopLeft], tethers: Some({t}))])"
+        );
+        let e = Scene::parse(&text, "t.ron").unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
+/// A mesh's tethers tie it to its pins, or to the body its pins hang on: the character's cape
+/// keeps every particle within its slack of the nearest collar particle while it walks.
+#[test]
+fn a_mesh_hung_on_a_body_is_tethered_to_it() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut scene = Scene::load(root.join("scenes/character_cape.ron")).unwrap();
+    scene.meshes[0].tethers = Some(harmonic::TetherSpec {
+        slack: 0.05,
+        anchors: 2,
+    });
+    let built = scene.build();
+    let tethers: usize = built
+        .world
+        .query::<&harmonic::Tethers>()
+        .iter()
+        .map(|t| t.links.len())
+        .sum();
+    let particles = built.world.query::<&Particle>().iter().count();
+    // Two anchors for every particle off the collar's row of 21.
+    assert_eq!(tethers, 2 * (particles - 21));
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    assert!(sim.schedule().has(StageKind::Tethers), "{}", sim.schedule());
+    for _ in 0..90 {
+        sim.step().unwrap();
+    }
+    assert!(sim.diagnostics().failure.is_none());
+}
