@@ -104,4 +104,54 @@ fn a_cloth_costs_at_most_150_bytes_per_particle() {
     );
     // Six springs per particle one by one cost several times more: the budget is the grid's.
     assert!(expanded > 3.0 * default, "{expanded:.1} vs {default:.1}");
+    // A mesh cloth of the same grid (one diagonal a cell), built from its vertex and triangle
+    // lists: its springs one by one, as `expanded`, and the mesh's own building on top.
+    let mesh = mesh_peak_per_particle(128);
+    println!("128×128 mesh: {mesh:.1} B per particle (symplectic Euler, fixed substeps)");
+    // As much as the grid's springs one by one: the mesh's building (welding, its topology)
+    // passes before the springs are packed, and adds nothing to the peak beyond that.
+    assert!(
+        mesh <= 1.1 * expanded,
+        "a mesh peaks at {mesh:.1} B per particle, the grid's springs one by one {expanded:.1}"
+    );
+}
+
+/// Peak heap bytes per particle while an n×n grid mesh builds, gathers and steps two frames
+/// (its vertex and triangle lists made before the count starts, as a loaded scene's are).
+fn mesh_peak_per_particle(n: u32) -> f64 {
+    use harmonic::scene::mesh::{MeshCloth, MeshPin};
+    let d = 1.0 / f64::from(n - 1);
+    let vertices = (0..n)
+        .flat_map(|r| (0..n).map(move |c| [f64::from(c) * d, 1.0 - f64::from(r) * d, 0.0]))
+        .collect();
+    let mut triangles = Vec::new();
+    for r in 0..n - 1 {
+        for c in 0..n - 1 {
+            let i = r * n + c;
+            triangles.push([i, i + 1, i + n + 1]);
+            triangles.push([i, i + n + 1, i + n]);
+        }
+    }
+    let mut scene = Scene::new(1.0 / 60.0);
+    scene.substeps = Some(4);
+    scene.integrator = Some("symplectic-euler".into());
+    let mesh: MeshCloth = ron::from_str(
+        "(mass: Some(1.0), stretch: (frequency: Some(30.0), damping_ratio: Some(0.1)), bend: Some((frequency: Some(3.0))))",
+    )
+    .unwrap();
+    scene.meshes.push(MeshCloth {
+        vertices,
+        triangles,
+        pins: vec![MeshPin::Vertices(vec![0, n - 1])],
+        ..mesh
+    });
+    let base = LIVE.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..2 {
+        sim.step().unwrap();
+    }
+    let particles = sim.positions().len();
+    drop(sim);
+    (PEAK.load(Ordering::Relaxed) - base) as f64 / particles as f64
 }
