@@ -353,6 +353,12 @@ impl MeshCloth {
     /// the cloth its topology gives (no triangle left, a region holding no vertex, a material
     /// beyond f32 at its reference mass).
     pub(super) fn check(&self, at: &str, limits: &super::Limits, is: &mut super::validate::Issues) {
+        if let Some(Err(e)) = self.air.map(|a| a.check()) {
+            is.push(format!("{at}.air"), e);
+        }
+        if let Some(Err(e)) = self.tethers.map(|t| t.check()) {
+            is.push(format!("{at}.tethers"), e);
+        }
         let before = is.0.len();
         let (n, t) = (self.vertices.len(), self.triangles.len());
         if n as u64 > limits.max_particles {

@@ -303,12 +303,6 @@ impl Scene {
         }
         for (i, m) in self.meshes.iter().enumerate() {
             m.check(&format!("meshes[{i}]"), limits, &mut is);
-            if let Some(Err(e)) = m.air.map(|a| a.check()) {
-                is.push(format!("meshes[{i}].air"), e);
-            }
-            if let Some(Err(e)) = m.tethers.map(|t| t.check()) {
-                is.push(format!("meshes[{i}].tethers"), e);
-            }
             match m.pinned_to {
                 Some(b) if b >= self.bodies.len() => is.push(
                     format!("meshes[{i}].pinned_to"),
