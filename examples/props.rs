@@ -34,6 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         velocity: [0.0; 3],
         air: None,
         tethers: None,
+        stretch_limit: None,
     });
     // Validation reports every problem with its location, as for a RON file.
     if let Some(issue) = scene.validate().first() {

@@ -55,11 +55,13 @@ pub struct EnergyAudit {
     /// collider included; a restitution `e` keeps `e²` of the approach's energy). Where the
     /// contacts run on the device, the work the colliders' motion does on the cloth, read from
     /// the impulses the contacts hand the bodies (`−(J·v + L·ω)`): the contacts' own
-    /// dissipation is then left in the residual, where it is negative. The tethers' projections
-    /// are booked here too.
+    /// dissipation is then left in the residual, where it is negative.
     pub contacts: f64,
     /// Removed by friction (the tangential velocity change against the collider).
     pub friction: f64,
+    /// Removed by the limits' projections: tethers ([`crate::TetherSpec`]) and stretch limits
+    /// ([`crate::StretchLimit`]), the change of `E` their moves made, negated.
+    pub limits: f64,
     /// Removed by the quarantine: in a frame that froze particles, the change of `E` the
     /// other lines leave unexplained is booked here (a blow-up, not an integration error).
     pub quarantine: f64,
@@ -91,6 +93,7 @@ impl EnergyAudit {
         self.damping += o.damping;
         self.contacts += o.contacts;
         self.friction += o.friction;
+        self.limits += o.limits;
         self.quarantine += o.quarantine;
         self.residual += o.residual;
     }
@@ -111,6 +114,8 @@ pub enum Line {
     Contacts,
     /// [`EnergyAudit::friction`]: the contact stage's friction.
     Friction,
+    /// [`EnergyAudit::limits`]: the tethers' and stretch limits' projections.
+    Limits,
 }
 
 /// What the projections of a contact stage did to the cloth's energy in a frame.
@@ -413,6 +418,7 @@ impl Auditor {
             Line::Attachments => &mut f.attachments,
             Line::Contacts => &mut f.contacts,
             Line::Friction => &mut f.friction,
+            Line::Limits => &mut f.limits,
         } += joules;
     }
 
@@ -423,7 +429,8 @@ impl Auditor {
         let unexplained = end - f.start - f.edits - f.attachments - f.forces
             + f.damping
             + f.contacts
-            + f.friction;
+            + f.friction
+            + f.limits;
         if quarantined || !unexplained.is_finite() {
             f.quarantine = -unexplained;
         } else {
@@ -442,18 +449,29 @@ impl Auditor {
 /// `½ m|v|² − m g·x` of a free particle; a pinned one holds none.
 #[inline]
 pub(crate) fn particle_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 {
-    let inv = packed.inv_mass[i];
+    particle_energy_at(packed.inv_mass[i], packed.x[i], packed.v[i], gravity)
+}
+
+/// A particle's kinetic and potential energy at `x`, `v` (0 for a pinned one, `inv` = 0).
+#[inline]
+fn particle_energy_at(inv: f64, x: DVec3, v: DVec3, gravity: DVec3) -> f64 {
     if inv == 0.0 {
         return 0.0;
     }
     let m = 1.0 / inv;
-    0.5 * m * packed.v[i].length_squared() - m * gravity.dot(packed.x[i])
+    0.5 * m * v.length_squared() - m * gravity.dot(x)
 }
 
 /// `½ κ δ²` of one spring at positions `x`.
 #[inline]
 pub(crate) fn spring_energy(x: &[DVec3], l: Link) -> f64 {
-    let d = (x[l.b] - x[l.a]).length() - l.rest;
+    spring_energy_at(x[l.a], x[l.b], l)
+}
+
+/// `½ κ δ²` of one spring with its ends at `xa`, `xb`.
+#[inline]
+fn spring_energy_at(xa: DVec3, xb: DVec3, l: Link) -> f64 {
+    let d = (xb - xa).length() - l.rest;
     0.5 * l.stiffness * d * d
 }
 
@@ -525,4 +543,62 @@ pub(crate) fn local_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 {
     let mut e = particle_energy(packed, i, gravity);
     springs_at(packed, i, |l| e += spring_energy(&packed.x, l));
     e
+}
+
+/// The change of `E` a projection stage makes, from the particles it moved: each one's state
+/// kept the first time the stage moves it, then its own energy and its springs' compared with
+/// the state now (every spring once). Its cost follows the particles moved, not the cloth.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Ledger {
+    /// Per particle, its place in `kept`, or `u32::MAX`.
+    slot: Vec<u32>,
+    kept: Vec<(u32, DVec3, DVec3)>,
+}
+
+impl Ledger {
+    /// Sized for `n` particles (at gather), nothing kept.
+    pub(crate) fn resize(&mut self, n: usize) {
+        self.slot.clear();
+        self.slot.resize(n, u32::MAX);
+        self.kept.clear();
+    }
+
+    /// Keeps particle `i`'s state before the stage's first move of it.
+    #[inline]
+    pub(crate) fn keep(&mut self, packed: &Packed, i: usize) {
+        if self.slot[i] == u32::MAX {
+            self.slot[i] = self.kept.len() as u32;
+            self.kept.push((i as u32, packed.x[i], packed.v[i]));
+        }
+    }
+
+    /// The change of `E` since the particles kept were kept (J); then nothing is kept.
+    pub(crate) fn close(&mut self, packed: &Packed, gravity: DVec3) -> f64 {
+        let (slot, kept) = (&self.slot, &self.kept);
+        let before = |j: usize| match slot[j] {
+            u32::MAX => packed.x[j],
+            k => kept[k as usize].1,
+        };
+        let mut change = 0.0;
+        for &(i, x0, v0) in kept {
+            let i = i as usize;
+            let inv = packed.inv_mass[i];
+            change +=
+                particle_energy(packed, i, gravity) - particle_energy_at(inv, x0, v0, gravity);
+            springs_at(packed, i, |l| {
+                let other = if l.a == i { l.b } else { l.a };
+                // A spring between two moved particles counts at its lower end.
+                if other < i && slot[other] != u32::MAX {
+                    return;
+                }
+                change += spring_energy_at(packed.x[l.a], packed.x[l.b], l)
+                    - spring_energy_at(before(l.a), before(l.b), l);
+            });
+        }
+        for &(i, _, _) in &self.kept {
+            self.slot[i as usize] = u32::MAX;
+        }
+        self.kept.clear();
+        change
+    }
 }

@@ -76,6 +76,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             velocity: [0.0; 3],
             air: None,
             tethers: None,
+            stretch_limit: None,
         }],
         ..Scene::new(1e-4)
     }

@@ -51,6 +51,7 @@ pub mod scene;
 mod schedule;
 mod simulation;
 mod step_control;
+mod stretch;
 mod tether;
 
 #[doc(hidden)]
@@ -74,6 +75,7 @@ pub use scene::Scene;
 pub use schedule::{Cadence, Failure, Place, Schedule, Stage, StageKind, StageTimes, StepStats};
 pub use simulation::{Advance, ClothId, Diagnostics, DriveId, RenderView, Simulation};
 pub use step_control::StepChoice;
+pub use stretch::StretchLimit;
 pub use tether::{TetherSpec, Tethers};
 
 // The versions the engine is built against, so a game matches them without guessing.

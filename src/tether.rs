@@ -7,8 +7,8 @@
 //! bound of the geodesic one along the cloth, so a tether never holds a particle closer than
 //! the cloth itself would. After the spring step a particle further than its limit from an
 //! anchor is put back on that sphere, and its velocity away from the anchor, relative to the
-//! anchor's own, removed; the audit books the change of `E` each projection made
-//! ([`crate::EnergyAudit::contacts`], with the other projections that only remove energy).
+//! anchor's own, removed; the audit books the change of `E` the projections made
+//! ([`crate::EnergyAudit::limits`], with the stretch limits').
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -116,6 +116,7 @@ pub fn build(world: &World, first: u32, count: u32, spec: &TetherSpec) -> Option
 #[derive(Debug, Default)]
 pub(crate) struct TetherStage {
     links: Vec<Link>,
+    ledger: crate::audit::Ledger,
     /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
     pub(crate) energy: f64,
 }
@@ -131,6 +132,8 @@ impl TetherStage {
             .collect();
         cloths.sort_unstable_by_key(|c| c.0);
         let n = packed.particle_count() as u32;
+        self.ledger
+            .resize(if cloths.is_empty() { 0 } else { n as usize });
         for (first, links) in cloths {
             self.links.extend(
                 (links.into_iter())
@@ -154,14 +157,14 @@ impl TetherStage {
             if len <= limit || !len.is_finite() || packed.inv_mass[i] == 0.0 {
                 continue;
             }
-            let before = crate::audit::local_energy(packed, i, gravity);
+            self.ledger.keep(packed, i);
             let n = d / len;
             packed.x[i] = packed.x[a] + n * limit;
             let away = (packed.v[i] - packed.v[a]).dot(n);
             if away > 0.0 {
                 packed.v[i] -= away * n;
             }
-            self.energy += crate::audit::local_energy(packed, i, gravity) - before;
         }
+        self.energy += self.ledger.close(packed, gravity);
     }
 }

@@ -221,6 +221,9 @@ impl Builder {
         if let Some(aero) = c.air {
             let _ = self.world.insert_one(e, aero);
         }
+        if let Some(limit) = c.stretch_limit {
+            let _ = self.world.insert_one(e, limit);
+        }
         self.cloths.push(e);
     }
 
@@ -257,6 +260,9 @@ impl Builder {
         },));
         if let Some(aero) = m.air {
             let _ = self.world.insert_one(e, aero);
+        }
+        if let Some(limit) = m.stretch_limit {
+            let _ = self.world.insert_one(e, limit);
         }
         self.cloths.push(e);
     }

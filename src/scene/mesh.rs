@@ -69,6 +69,10 @@ pub struct MeshCloth {
     /// Tethers from its pinned or attached particles (`(slack, anchors)`); none: no tethers.
     #[serde(default)]
     pub tethers: Option<crate::TetherSpec>,
+    /// Its springs held within `(1 + stretch)` of their rest lengths (`(stretch, passes)`);
+    /// none: no limit.
+    #[serde(default)]
+    pub stretch_limit: Option<crate::StretchLimit>,
     /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
     /// read with its file; not written to a scene.
     #[serde(skip)]
@@ -358,6 +362,9 @@ impl MeshCloth {
         }
         if let Some(Err(e)) = self.tethers.map(|t| t.check()) {
             is.push(format!("{at}.tethers"), e);
+        }
+        if let Some(Err(e)) = self.stretch_limit.map(|t| t.check()) {
+            is.push(format!("{at}.stretch_limit"), e);
         }
         let before = is.0.len();
         let (n, t) = (self.vertices.len(), self.triangles.len());

@@ -383,6 +383,10 @@ pub struct Cloth {
     /// Tethers from its pinned particles (`(slack, anchors)`); none: no tethers.
     #[serde(default)]
     pub tethers: Option<crate::TetherSpec>,
+    /// Its springs held within `(1 + stretch)` of their rest lengths (`(stretch, passes)`);
+    /// none: no limit.
+    #[serde(default)]
+    pub stretch_limit: Option<crate::StretchLimit>,
 }
 
 /// A rope or chain of equal particles from `start` to `end`.

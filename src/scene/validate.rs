@@ -244,6 +244,9 @@ impl Scene {
             if let Some(Err(e)) = c.tethers.map(|t| t.check()) {
                 is.push(format!("{at}.tethers"), e);
             }
+            if let Some(Err(e)) = c.stretch_limit.map(|t| t.check()) {
+                is.push(format!("{at}.stretch_limit"), e);
+            }
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);

@@ -41,6 +41,9 @@ pub enum StageKind {
     /// Tethers ([`crate::Tethers`]): particles further than their limit from an anchor put
     /// back, their velocity away from it removed.
     Tethers,
+    /// Stretch limits ([`crate::StretchLimit`]): springs longer than their limit put back,
+    /// their ends' separating velocity removed.
+    StretchLimit,
     /// Rigid bodies (the scene's own rapier world or the caller's sets): attached particles
     /// follow their bodies, then particles are pushed out of colliders with friction and the
     /// dynamic bodies get the opposite impulses.
@@ -52,13 +55,14 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 8] = [
+    pub const ALL: [StageKind; 9] = [
         StageKind::Gravity,
         StageKind::Air,
         StageKind::Forces,
         StageKind::Integrate,
         StageKind::Drive,
         StageKind::Tethers,
+        StageKind::StretchLimit,
         StageKind::Contacts,
         StageKind::Quarantine,
     ];
@@ -75,6 +79,7 @@ impl StageKind {
             StageKind::Integrate => "integrate",
             StageKind::Drive => "drive",
             StageKind::Tethers => "tethers",
+            StageKind::StretchLimit => "stretch limit",
             StageKind::Contacts => "contacts",
             StageKind::Quarantine => "quarantine",
         }
@@ -88,6 +93,7 @@ impl StageKind {
             StageKind::Integrate
             | StageKind::Drive
             | StageKind::Tethers
+            | StageKind::StretchLimit
             | StageKind::Contacts
             | StageKind::Quarantine => Cadence::Substep,
         }
@@ -98,9 +104,11 @@ impl StageKind {
         match self {
             StageKind::Gravity | StageKind::Air | StageKind::Forces => Place::BeforeIntegrate,
             StageKind::Integrate => Place::Integrate,
-            StageKind::Drive | StageKind::Tethers | StageKind::Contacts | StageKind::Quarantine => {
-                Place::AfterIntegrate
-            }
+            StageKind::Drive
+            | StageKind::Tethers
+            | StageKind::StretchLimit
+            | StageKind::Contacts
+            | StageKind::Quarantine => Place::AfterIntegrate,
         }
     }
 
@@ -114,7 +122,9 @@ impl StageKind {
             StageKind::Drive => {
                 "attachments: the driven pins' moves and the maximum distances' projections"
             }
-            StageKind::Tethers => "contacts: the change of E its projections made",
+            StageKind::Tethers | StageKind::StretchLimit => {
+                "limits: the change of E its projections made"
+            }
             StageKind::Contacts => "attachments, contacts and friction: its projections",
             StageKind::Quarantine => "quarantine: the energy of the particles it froze",
         }
@@ -166,7 +176,10 @@ impl Stage {
         self.on == Backend::Cpu
             && matches!(
                 self.kind,
-                StageKind::Drive | StageKind::Tethers | StageKind::Contacts
+                StageKind::Drive
+                    | StageKind::Tethers
+                    | StageKind::StretchLimit
+                    | StageKind::Contacts
             )
     }
 }
@@ -193,6 +206,8 @@ pub(crate) struct Needs {
     pub(crate) air: bool,
     /// Cloths have tethers.
     pub(crate) tethers: bool,
+    /// Cloths have stretch limits.
+    pub(crate) stretch: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -227,6 +242,9 @@ impl Schedule {
         }
         if n.tethers {
             push(StageKind::Tethers, Backend::Cpu);
+        }
+        if n.stretch {
+            push(StageKind::StretchLimit, Backend::Cpu);
         }
         if let Some(on) = n.contacts_on {
             push(StageKind::Contacts, on);

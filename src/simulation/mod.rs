@@ -104,6 +104,8 @@ pub struct Simulation {
     air: crate::air::AirSurfaces,
     /// The cloths' tethers, in packed indices.
     tethers: crate::tether::TetherStage,
+    /// The cloths' stretch limits, in packed indices.
+    stretch: crate::stretch::StretchStage,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -250,6 +252,7 @@ impl Simulation {
             drives: Default::default(),
             air: Default::default(),
             tethers: Default::default(),
+            stretch: Default::default(),
             timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
@@ -499,6 +502,7 @@ impl Simulation {
             forces: self.forces.as_ref().is_some_and(|f| f.game()),
             air: !self.air.is_empty(),
             tethers: !self.tethers.is_empty(),
+            stretch: !self.stretch.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,
             substeps: self.config.substeps,

@@ -72,6 +72,7 @@ impl Simulation {
             && self.user_stage.is_none()
             && self.drives.is_empty()
             && self.tethers.is_empty()
+            && self.stretch.is_empty()
             && self.steps.is_multiple_of(CHECK_EVERY)
             && !self.packed.x.is_empty()
     }

@@ -23,6 +23,8 @@ pub(super) struct Run<'a> {
     pub(super) drives: Option<&'a mut super::drive::Drives>,
     /// The tethers, when their stage is listed.
     pub(super) tethers: Option<&'a mut crate::tether::TetherStage>,
+    /// The stretch limits, when their stage is listed.
+    pub(super) stretch: Option<&'a mut crate::stretch::StretchStage>,
     pub(super) gravity: DVec3,
     /// The frame's substeps (a retry's, once it runs).
     pub(super) frame_substeps: u32,
@@ -153,7 +155,10 @@ impl Run<'_> {
             self.auditor.book(Line::Attachments, d.energy);
         }
         if let Some(t) = &self.tethers {
-            self.auditor.book(Line::Contacts, -t.energy);
+            self.auditor.book(Line::Limits, -t.energy);
+        }
+        if let Some(s) = &self.stretch {
+            self.auditor.book(Line::Limits, -s.energy);
         }
         if let Some(c) = self.coupling.as_mut() {
             for (line, joules) in c.stage().energy.lines() {
@@ -167,6 +172,9 @@ impl Run<'_> {
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
         if let (StageKind::Tethers, 0, Some(t)) = (stage.kind, k, self.tethers.as_mut()) {
             t.energy = 0.0;
+        }
+        if let (StageKind::StretchLimit, 0, Some(s)) = (stage.kind, k, self.stretch.as_mut()) {
+            s.energy = 0.0;
         }
         if stage.kind == StageKind::Drive {
             if let Some(d) = self.drives.as_mut() {
@@ -239,6 +247,14 @@ impl Run<'_> {
                 }
                 self.host_moved();
                 self.charge(StageKind::Tethers);
+            }
+            (StageKind::StretchLimit, _) => {
+                self.state_to_host()?;
+                if let Some(s) = self.stretch.as_mut() {
+                    s.project(self.packed, self.gravity);
+                }
+                self.host_moved();
+                self.charge(StageKind::StretchLimit);
             }
             (StageKind::Contacts, Backend::Gpu) => self.device_contacts(k, n)?,
             (StageKind::Contacts, _) => {

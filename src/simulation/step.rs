@@ -144,6 +144,7 @@ impl Simulation {
             forces,
             drives: (!self.drives.is_empty()).then_some(&mut self.drives),
             tethers: (!self.tethers.is_empty()).then_some(&mut self.tethers),
+            stretch: (!self.stretch.is_empty()).then_some(&mut self.stretch),
             gravity: self.config.gravity,
             frame_substeps: 0,
             packed: &mut self.packed,
@@ -446,6 +447,7 @@ impl Simulation {
         }
         self.drives.refresh(&self.packed);
         self.tethers.gather(&self.world, &self.packed);
+        self.stretch.gather(&self.world, &self.packed);
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.estimate_network();

@@ -77,18 +77,23 @@ fn record(
 }
 
 /// The energy books bit for bit (f64's Debug is its shortest exact form), as the derived
-/// Debug wrote them before the forces' line: that line is added only where it is not zero, so
-/// a record made before it still holds.
+/// Debug wrote them before the forces' and limits' lines: those are added only where they are
+/// not zero, so a record made before them still holds.
 fn books(a: &EnergyAudit) -> String {
     let forces = if a.forces != 0.0 {
         format!(", forces: {:?}", a.forces)
     } else {
         String::new()
     };
+    let limits = if a.limits != 0.0 {
+        format!(", limits: {:?}", a.limits)
+    } else {
+        String::new()
+    };
     format!(
         "EnergyAudit {{ start: {:?}, energy: {:?}, edits: {:?}, attachments: {:?}, damping: {:?}, \
          contacts: {:?}, friction: {:?}, quarantine: {:?}, residual: {:?}, peak_residual: {:?}, \
-         scale: {:?}{forces} }}",
+         scale: {:?}{forces}{limits} }}",
         a.start,
         a.energy,
         a.edits,

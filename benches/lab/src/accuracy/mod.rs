@@ -70,6 +70,7 @@ pub fn swinging_cloth(n: u32, stiffness: f64, throw: f64) -> Scene {
         velocity: [throw, 0.0, 0.0],
         air: None,
         tethers: None,
+        stretch_limit: None,
     }];
     s
 }

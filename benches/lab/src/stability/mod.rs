@@ -171,6 +171,7 @@ pub fn cloth(n: u32, zeta: f64) -> Scene {
         velocity: [0.0; 3],
         air: None,
         tethers: None,
+        stretch_limit: None,
     }];
     s
 }
