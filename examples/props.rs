@@ -35,6 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         air: None,
         tethers: None,
         stretch_limit: None,
+        tearing: None,
     });
     // Validation reports every problem with its location, as for a RON file.
     if let Some(issue) = scene.validate().first() {

@@ -62,6 +62,8 @@ pub struct EnergyAudit {
     /// Removed by the limits' projections: tethers ([`crate::TetherSpec`]) and stretch limits
     /// ([`crate::StretchLimit`]), the change of `E` their moves made, negated.
     pub limits: f64,
+    /// Removed by tearing ([`crate::Tearing`]): the energy the springs that broke held.
+    pub torn: f64,
     /// Removed by the quarantine: in a frame that froze particles, the change of `E` the
     /// other lines leave unexplained is booked here (a blow-up, not an integration error).
     pub quarantine: f64,
@@ -94,6 +96,7 @@ impl EnergyAudit {
         self.contacts += o.contacts;
         self.friction += o.friction;
         self.limits += o.limits;
+        self.torn += o.torn;
         self.quarantine += o.quarantine;
         self.residual += o.residual;
     }
@@ -116,6 +119,8 @@ pub enum Line {
     Friction,
     /// [`EnergyAudit::limits`]: the tethers' and stretch limits' projections.
     Limits,
+    /// [`EnergyAudit::torn`]: the broken springs' energy.
+    Torn,
 }
 
 /// What the projections of a contact stage did to the cloth's energy in a frame.
@@ -419,6 +424,7 @@ impl Auditor {
             Line::Contacts => &mut f.contacts,
             Line::Friction => &mut f.friction,
             Line::Limits => &mut f.limits,
+            Line::Torn => &mut f.torn,
         } += joules;
     }
 
@@ -430,7 +436,8 @@ impl Auditor {
             + f.damping
             + f.contacts
             + f.friction
-            + f.limits;
+            + f.limits
+            + f.torn;
         if quarantined || !unexplained.is_finite() {
             f.quarantine = -unexplained;
         } else {

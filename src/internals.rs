@@ -77,6 +77,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             air: None,
             tethers: None,
             stretch_limit: None,
+            tearing: None,
         }],
         ..Scene::new(1e-4)
     }

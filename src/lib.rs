@@ -52,6 +52,7 @@ mod schedule;
 mod simulation;
 mod step_control;
 mod stretch;
+mod tear;
 mod tether;
 
 #[doc(hidden)]
@@ -76,6 +77,7 @@ pub use schedule::{Cadence, Failure, Place, Schedule, Stage, StageKind, StageTim
 pub use simulation::{Advance, ClothId, Diagnostics, DriveId, RenderView, Simulation};
 pub use step_control::StepChoice;
 pub use stretch::StretchLimit;
+pub use tear::{Tear, Tearing};
 pub use tether::{TetherSpec, Tethers};
 
 // The versions the engine is built against, so a game matches them without guessing.

@@ -184,10 +184,14 @@ impl Builder {
             .reserve::<(Particle, SceneIndex)>((cols * rows + 1) as u32);
         self.world
             .reserve::<(Particle, SceneIndex, Pin)>(pins as u32);
+        let mut ids = Vec::with_capacity(if c.tearing.is_some() { cols * rows } else { 0 });
         for row in 0..rows {
             for col in 0..cols {
                 let x = origin + u * (col as f64 * du) + v * (row as f64 * dv);
-                self.particle(x, vel, m, pinned(col, row));
+                let e = self.particle(x, vel, m, pinned(col, row));
+                if c.tearing.is_some() {
+                    ids.push(e);
+                }
             }
         }
         let mut links = Vec::new();
@@ -210,14 +214,16 @@ impl Builder {
             link(s, (2, 0));
             link(s, (0, 2));
         }
-        let e = self.world.spawn((ClothSprings {
-            grid: ClothGrid {
-                first,
-                cols: cols as u32,
-                rows: rows as u32,
-            },
-            links,
-        },));
+        let grid = ClothGrid {
+            first,
+            cols: cols as u32,
+            rows: rows as u32,
+        };
+        let e = if let Some(tearing) = c.tearing {
+            self.torn_grid(grid, &ids, &links, tearing)
+        } else {
+            self.world.spawn((ClothSprings { grid, links },))
+        };
         if let Some(aero) = c.air {
             let _ = self.world.insert_one(e, aero);
         }
@@ -225,6 +231,47 @@ impl Builder {
             let _ = self.world.insert_one(e, limit);
         }
         self.cloths.push(e);
+    }
+
+    /// A tearable grid cloth's springs one by one (a break changes them) and its grid's
+    /// triangles as a [`MeshSurface`], for the particles `ids` of `grid`; returns the surface's
+    /// entity.
+    fn torn_grid(
+        &mut self,
+        grid: ClothGrid,
+        ids: &[Entity],
+        links: &[GridLink],
+        tearing: crate::Tearing,
+    ) -> Entity {
+        let (cols, rows) = (grid.cols as i64, grid.rows as i64);
+        for l in links {
+            let (dc, dr) = (l.offset.0 as i64, l.offset.1 as i64);
+            for row in 0..rows {
+                for col in 0..cols {
+                    let (cb, rb) = (col + dc, row + dr);
+                    if cb < 0 || rb < 0 || cb >= cols || rb >= rows {
+                        continue;
+                    }
+                    self.world.spawn((Spring {
+                        a: ids[(row * cols + col) as usize],
+                        b: ids[(rb * cols + cb) as usize],
+                        rest_length: l.rest_length,
+                        stiffness: l.stiffness,
+                        damping: l.damping,
+                    },));
+                }
+            }
+        }
+        let mut triangles = Vec::new();
+        ClothGrid { first: 0, ..grid }.triangles(&mut triangles);
+        self.world.spawn((
+            MeshSurface {
+                first: grid.first,
+                count: grid.cols * grid.rows,
+                triangles,
+            },
+            tearing,
+        ))
     }
 
     /// A mesh cloth: its particles, a spring per edge (and across each interior edge), and a
@@ -263,6 +310,9 @@ impl Builder {
         }
         if let Some(limit) = m.stretch_limit {
             let _ = self.world.insert_one(e, limit);
+        }
+        if let Some(tearing) = m.tearing {
+            let _ = self.world.insert_one(e, tearing);
         }
         self.cloths.push(e);
     }

@@ -73,6 +73,9 @@ pub struct MeshCloth {
     /// none: no limit.
     #[serde(default)]
     pub stretch_limit: Option<crate::StretchLimit>,
+    /// Its springs break past a stretch (`(stretch)`); none: it does not tear.
+    #[serde(default)]
+    pub tearing: Option<crate::Tearing>,
     /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
     /// read with its file; not written to a scene.
     #[serde(skip)]
@@ -365,6 +368,9 @@ impl MeshCloth {
         }
         if let Some(Err(e)) = self.stretch_limit.map(|t| t.check()) {
             is.push(format!("{at}.stretch_limit"), e);
+        }
+        if let Some(Err(e)) = self.tearing.map(|t| t.check_beside(self.stretch_limit)) {
+            is.push(format!("{at}.tearing"), e);
         }
         let before = is.0.len();
         let (n, t) = (self.vertices.len(), self.triangles.len());

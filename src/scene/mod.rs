@@ -387,6 +387,10 @@ pub struct Cloth {
     /// none: no limit.
     #[serde(default)]
     pub stretch_limit: Option<crate::StretchLimit>,
+    /// Its springs break past a stretch (`(stretch)`); none: it does not tear. A tearable
+    /// cloth keeps its springs one by one (built as a mesh of its grid).
+    #[serde(default)]
+    pub tearing: Option<crate::Tearing>,
 }
 
 /// A rope or chain of equal particles from `start` to `end`.

@@ -247,6 +247,9 @@ impl Scene {
             if let Some(Err(e)) = c.stretch_limit.map(|t| t.check()) {
                 is.push(format!("{at}.stretch_limit"), e);
             }
+            if let Some(Err(e)) = c.tearing.map(|t| t.check_beside(c.stretch_limit)) {
+                is.push(format!("{at}.tearing"), e);
+            }
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);

@@ -48,6 +48,9 @@ pub enum StageKind {
     /// follow their bodies, then particles are pushed out of colliders with friction and the
     /// dynamic bodies get the opposite impulses.
     Contacts,
+    /// Tearing ([`crate::Tearing`]): at the frame's end, springs stretched past their
+    /// cloth's breaking stretch break, and their triangles go from its surface.
+    Tearing,
     /// Particles gone non-finite are frozen at their last finite position, before any spring
     /// reads them again.
     Quarantine,
@@ -55,7 +58,7 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 9] = [
+    pub const ALL: [StageKind; 10] = [
         StageKind::Gravity,
         StageKind::Air,
         StageKind::Forces,
@@ -65,6 +68,7 @@ impl StageKind {
         StageKind::StretchLimit,
         StageKind::Contacts,
         StageKind::Quarantine,
+        StageKind::Tearing,
     ];
 
     /// How many kinds there are (the length of [`StageTimes`]).
@@ -79,9 +83,10 @@ impl StageKind {
             StageKind::Integrate => "integrate",
             StageKind::Drive => "drive",
             StageKind::Tethers => "tethers",
-            StageKind::StretchLimit => "stretch limit",
+            StageKind::StretchLimit => "stretch-limit",
             StageKind::Contacts => "contacts",
             StageKind::Quarantine => "quarantine",
+            StageKind::Tearing => "tearing",
         }
     }
 
@@ -89,7 +94,7 @@ impl StageKind {
     pub fn cadence(self) -> Cadence {
         match self {
             StageKind::Gravity => Cadence::Fused,
-            StageKind::Air | StageKind::Forces => Cadence::Frame,
+            StageKind::Air | StageKind::Forces | StageKind::Tearing => Cadence::Frame,
             StageKind::Integrate
             | StageKind::Drive
             | StageKind::Tethers
@@ -108,7 +113,8 @@ impl StageKind {
             | StageKind::Tethers
             | StageKind::StretchLimit
             | StageKind::Contacts
-            | StageKind::Quarantine => Place::AfterIntegrate,
+            | StageKind::Quarantine
+            | StageKind::Tearing => Place::AfterIntegrate,
         }
     }
 
@@ -127,6 +133,7 @@ impl StageKind {
             }
             StageKind::Contacts => "attachments, contacts and friction: its projections",
             StageKind::Quarantine => "quarantine: the energy of the particles it froze",
+            StageKind::Tearing => "torn: the energy the broken springs held",
         }
     }
 
@@ -152,7 +159,8 @@ pub enum Place {
 pub enum Cadence {
     /// Summed into the integrate kernel's external acceleration: no pass of its own.
     Fused,
-    /// Once per frame, before the substeps (its result then held for all of them).
+    /// Once per frame: before the substeps (air and forces, their result then held for all
+    /// of them), or at the frame's end (tearing).
     Frame,
     /// Once per substep (on the device, quarantine checks the state where it comes back to
     /// the host: after each substep where a host stage needs the state, else once a frame).
@@ -208,6 +216,8 @@ pub(crate) struct Needs {
     pub(crate) tethers: bool,
     /// Cloths have stretch limits.
     pub(crate) stretch: bool,
+    /// Cloths tear.
+    pub(crate) tearing: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -250,6 +260,9 @@ impl Schedule {
             push(StageKind::Contacts, on);
         }
         push(StageKind::Quarantine, Backend::Cpu);
+        if n.tearing {
+            push(StageKind::Tearing, Backend::Cpu);
+        }
         self.integrator = Some(n.integrator);
         self.substeps = n.substeps;
         self.device_per_substep = n.device_contacts_per_substep;

@@ -35,6 +35,7 @@ mod motion;
 mod quarantine;
 mod run;
 mod step;
+mod tearing;
 
 use coupling::Coupling;
 pub use drive::DriveId;
@@ -106,6 +107,9 @@ pub struct Simulation {
     tethers: crate::tether::TetherStage,
     /// The cloths' stretch limits, in packed indices.
     stretch: crate::stretch::StretchStage,
+    /// The tearable cloths' springs, and the last frame's breaks.
+    tear: crate::tear::TearStage,
+    torn: Vec<crate::Tear>,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -253,6 +257,8 @@ impl Simulation {
             air: Default::default(),
             tethers: Default::default(),
             stretch: Default::default(),
+            tear: Default::default(),
+            torn: Vec::new(),
             timers: true,
             #[cfg(feature = "gpu")]
             gpu: gpu_solver(&config)?,
@@ -503,6 +509,7 @@ impl Simulation {
             air: !self.air.is_empty(),
             tethers: !self.tethers.is_empty(),
             stretch: !self.stretch.is_empty(),
+            tearing: !self.tear.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,
             substeps: self.config.substeps,

@@ -73,6 +73,7 @@ impl Simulation {
             && self.drives.is_empty()
             && self.tethers.is_empty()
             && self.stretch.is_empty()
+            && self.tear.is_empty()
             && self.steps.is_multiple_of(CHECK_EVERY)
             && !self.packed.x.is_empty()
     }

@@ -25,6 +25,8 @@ pub(super) struct Run<'a> {
     pub(super) tethers: Option<&'a mut crate::tether::TetherStage>,
     /// The stretch limits, when their stage is listed.
     pub(super) stretch: Option<&'a mut crate::stretch::StretchStage>,
+    /// The tearing stage, when listed (it runs at the frame's end, in the frame's job).
+    pub(super) tear: Option<&'a mut crate::tear::TearStage>,
     pub(super) gravity: DVec3,
     /// The frame's substeps (a retry's, once it runs).
     pub(super) frame_substeps: u32,
@@ -160,6 +162,9 @@ impl Run<'_> {
         if let Some(s) = &self.stretch {
             self.auditor.book(Line::Limits, -s.energy);
         }
+        if let Some(t) = &self.tear {
+            self.auditor.book(Line::Torn, t.energy);
+        }
         if let Some(c) = self.coupling.as_mut() {
             for (line, joules) in c.stage().energy.lines() {
                 self.auditor.book(line, joules);
@@ -218,6 +223,8 @@ impl Run<'_> {
             // Fused: the integrate kernel reads them as its external acceleration (the force
             // stage's frame-start work is done before the substeps).
             (StageKind::Gravity | StageKind::Air | StageKind::Forces, _) => {}
+            // At the frame's end, in the frame's job after the last substep.
+            (StageKind::Tearing, _) => {}
             (StageKind::Integrate, Backend::Gpu) => self.integrate_on_device(k, n)?,
             (StageKind::Integrate, _) => {
                 self.auditor.begin_substep(self.packed);

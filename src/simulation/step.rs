@@ -145,6 +145,7 @@ impl Simulation {
             drives: (!self.drives.is_empty()).then_some(&mut self.drives),
             tethers: (!self.tethers.is_empty()).then_some(&mut self.tethers),
             stretch: (!self.stretch.is_empty()).then_some(&mut self.stretch),
+            tear: (!self.tear.is_empty()).then_some(&mut self.tear),
             gravity: self.config.gravity,
             frame_substeps: 0,
             packed: &mut self.packed,
@@ -174,7 +175,7 @@ impl Simulation {
             let run = run_ref;
             let (damping, work) = (run.auditor.frame.damping, run.auditor.frame.forces);
             let mut h = h;
-            let end = loop {
+            let mut end = loop {
                 run.substeps(*substeps_out, h)?;
                 let t = run.timed.then(Instant::now);
                 let e = run.auditor.energy(run.packed, gravity);
@@ -188,7 +189,8 @@ impl Simulation {
                 let before = run.auditor.run.residual;
                 // The drive stage's moves are booked at the frame's end (`book_frame`).
                 let driven = run.drives.as_ref().map_or(0.0, |d| d.energy);
-                let tied = run.tethers.as_ref().map_or(0.0, |t| t.energy);
+                let tied = run.tethers.as_ref().map_or(0.0, |t| t.energy)
+                    + run.stretch.as_ref().map_or(0.0, |s| s.energy);
                 let after = before + (e - f.start - f.edits - f.forces - driven - tied + f.damping);
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
                     break e;
@@ -200,9 +202,18 @@ impl Simulation {
                 h = dt / more as f64;
                 run.prepare(h)?;
             };
+            // The tearing stage, at the frame's end: the springs it breaks leave `E`.
+            if let Some(t) = run.tear.as_mut() {
+                t.find(run.packed);
+                end -= t.energy;
+            }
             run.book_frame();
-            // The strain check reads the frame's end state inside the same job.
-            let beyond = limit.is_finite() && crate::metrics::beyond(run.packed, limit);
+            // The strain check reads the frame's end state inside the same job (a spring that
+            // broke is gone).
+            let mut beyond = limit.is_finite() && crate::metrics::beyond(run.packed, limit);
+            if let Some(t) = run.tear.as_ref().filter(|t| beyond && !t.broken.is_empty()) {
+                beyond = t.beyond_unbroken(run.packed, limit);
+            }
             Ok::<_, SimError>((end, beyond))
         };
         let (end, beyond) = if self.parallel {
@@ -277,6 +288,7 @@ impl Simulation {
         let quarantined = std::mem::take(&mut self.newly_quarantined);
         self.auditor.end_frame(end, quarantined > 0);
         self.packed.scatter(&mut self.world);
+        self.tear_apart();
         let failure = self.check_strain(beyond).or_else(|| self.check_energy());
         self.failure = self.failure.or(failure);
         let t3 = Instant::now();
@@ -448,6 +460,7 @@ impl Simulation {
         self.drives.refresh(&self.packed);
         self.tethers.gather(&self.world, &self.packed);
         self.stretch.gather(&self.world, &self.packed);
+        self.tear.gather(&self.world, &self.packed);
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);
         self.estimate_network();

@@ -77,7 +77,7 @@ fn record(
 }
 
 /// The energy books bit for bit (f64's Debug is its shortest exact form), as the derived
-/// Debug wrote them before the forces' and limits' lines: those are added only where they are
+/// Debug wrote them before the forces', limits' and torn lines: those are added only where they are
 /// not zero, so a record made before them still holds.
 fn books(a: &EnergyAudit) -> String {
     let forces = if a.forces != 0.0 {
@@ -85,11 +85,13 @@ fn books(a: &EnergyAudit) -> String {
     } else {
         String::new()
     };
-    let limits = if a.limits != 0.0 {
-        format!(", limits: {:?}", a.limits)
-    } else {
-        String::new()
-    };
+    let mut limits = String::new();
+    if a.limits != 0.0 {
+        limits += &format!(", limits: {:?}", a.limits);
+    }
+    if a.torn != 0.0 {
+        limits += &format!(", torn: {:?}", a.torn);
+    }
     format!(
         "EnergyAudit {{ start: {:?}, energy: {:?}, edits: {:?}, attachments: {:?}, damping: {:?}, \
          contacts: {:?}, friction: {:?}, quarantine: {:?}, residual: {:?}, peak_residual: {:?}, \

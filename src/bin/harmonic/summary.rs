@@ -100,7 +100,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
     };
     format!(
         "energy audit: residual {:+.4e} J{}, peak {:.4e} J{} (made by the steps; negative: numerical \
-         damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, limits {:.4e} J, quarantine {:.4e} J; \
+         damping); dampers took {:.4e} J, contacts {:.4e} J, friction {:.4e} J, limits {:.4e} J, torn {:.4e} J, quarantine {:.4e} J; \
          attachments put in {:.4e} J, forces and air {:.4e} J, edits {:.4e} J; its passes took \
          {seconds:.3} s ({} % of integrate, where the grid pass books its dampers)",
         a.residual,
@@ -111,6 +111,7 @@ pub fn audit(a: &EnergyAudit, seconds: f64, integrate: f64) -> String {
         a.contacts,
         a.friction,
         a.limits,
+        a.torn,
         a.quarantine,
         a.attachments,
         a.forces,

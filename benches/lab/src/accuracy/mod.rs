@@ -71,6 +71,7 @@ pub fn swinging_cloth(n: u32, stiffness: f64, throw: f64) -> Scene {
         air: None,
         tethers: None,
         stretch_limit: None,
+        tearing: None,
     }];
     s
 }

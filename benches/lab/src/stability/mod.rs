@@ -172,6 +172,7 @@ pub fn cloth(n: u32, zeta: f64) -> Scene {
         air: None,
         tethers: None,
         stretch_limit: None,
+        tearing: None,
     }];
     s
 }
