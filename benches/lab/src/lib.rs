@@ -17,6 +17,7 @@
 pub mod accuracy;
 pub mod baseline;
 pub mod frame_time;
+pub mod game_cost;
 #[cfg(feature = "gpu")]
 pub mod gpu_bench;
 pub mod peer;

@@ -126,6 +126,14 @@ enum Command {
         #[arg(default_value = "scenes/drape_sphere.ron")]
         scene: PathBuf,
     },
+    /// A stiff cloth's look at a game's cost: the 128×128 two-corner cloth stiff (k = 1e4 N/m)
+    /// at its automatic substeps and converged, against soft springs held by tethers and a
+    /// stretch limit: ms per frame, peak strain, RMS from the converged stiff cloth.
+    GameCost {
+        /// Frames of 1/60 s.
+        #[arg(long, default_value_t = 60)]
+        frames: u32,
+    },
 }
 
 /// The longest hard case `stability --seconds` runs (an hour simulated: hours of wall time).
@@ -209,6 +217,10 @@ fn main() -> ExitCode {
                 );
             }),
         Command::DrapePeer { scene } => drape_peer(&scene),
+        Command::GameCost { frames: 0 } => Err("--frames 0: run at least one frame".into()),
+        Command::GameCost { frames } => {
+            harmonic_lab::game_cost::report(frames).map(|r| print!("{r}"))
+        }
         Command::FrameTime { case, repeats } => harmonic_lab::frame_time::measure(&case, repeats)
             .map(|runs| {
                 for t in runs {

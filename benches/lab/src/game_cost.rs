@@ -1,0 +1,174 @@
+//! `harmonic-lab game-cost`: a stiff cloth's look at a game's cost. The 128×128 cloth of 1 m and
+//! 1 kg hanging from its two top corners, stiff (k = 1e4 N/m, the peers' benchmark cloth) at its
+//! own automatic substeps and converged (twice them), against the shipped soft springs (200 Hz)
+//! held by tethers, with and without a stretch limit: wall time per 60 Hz frame, peak
+//! structural strain, and the RMS distance from the converged stiff cloth at t = 1 s, all from
+//! one run; and what the tethers, the stretch limit and air cost beside the spring stage.
+
+use std::time::{Duration, Instant};
+
+use harmonic::internals::hanging_cloth;
+use harmonic::scene::SpringSpec;
+use harmonic::{Aero, Scene, Simulation, StageKind, StretchLimit, TetherSpec};
+
+const N: usize = 128;
+
+/// One cloth's run: its mean wall time per frame, its peak structural strain, its positions
+/// at the end, its substeps at the end, and its stages' times summed.
+struct Run {
+    frame: f64,
+    peak: f64,
+    end: Vec<harmonic::glam::DVec3>,
+    substeps: u32,
+    integrate: Duration,
+    tethers: Duration,
+    stretch: Duration,
+    air: Duration,
+}
+
+/// The worst stretch of the cloth's structural springs (rest 1/127 m), a share of rest.
+fn peak_strain(x: &[harmonic::glam::DVec3]) -> f64 {
+    let rest = 1.0 / (N - 1) as f64;
+    let mut worst: f64 = 0.0;
+    for r in 0..N {
+        for c in 0..N {
+            let i = r * N + c;
+            if c + 1 < N {
+                worst = worst.max((x[i + 1] - x[i]).length() / rest - 1.0);
+            }
+            if r + 1 < N {
+                worst = worst.max((x[i + N] - x[i]).length() / rest - 1.0);
+            }
+        }
+    }
+    worst
+}
+
+fn run(scene: &Scene, frames: u32) -> Result<Run, String> {
+    let mut sim = Simulation::from_scene(scene).map_err(|e| e.to_string())?;
+    let mut r = Run {
+        frame: 0.0,
+        peak: 0.0,
+        end: Vec::new(),
+        substeps: 0,
+        integrate: Duration::ZERO,
+        tethers: Duration::ZERO,
+        stretch: Duration::ZERO,
+        air: Duration::ZERO,
+    };
+    let mut wall = Duration::ZERO;
+    for _ in 0..frames {
+        let t = Instant::now();
+        let s = *sim.step().map_err(|e| e.to_string())?;
+        wall += t.elapsed();
+        r.integrate += s.stages[StageKind::Integrate];
+        r.tethers += s.stages[StageKind::Tethers];
+        r.stretch += s.stages[StageKind::StretchLimit];
+        r.air += s.stages[StageKind::Air] + s.stages[StageKind::Forces];
+        r.peak = r.peak.max(peak_strain(sim.positions()));
+    }
+    if let Some(f) = sim.diagnostics().failure {
+        return Err(format!("{}: {f:?}", scene.name.as_deref().unwrap_or("?")));
+    }
+    r.frame = wall.as_secs_f64() / f64::from(frames);
+    r.end = sim.positions().to_vec();
+    r.substeps = sim.config().substeps;
+    Ok(r)
+}
+
+fn rms(a: &[harmonic::glam::DVec3], b: &[harmonic::glam::DVec3]) -> f64 {
+    let sum: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length_squared())
+        .sum();
+    (sum / a.len() as f64).sqrt()
+}
+
+/// The cloth: stiff (k = 1e4 N/m) or the shipped soft springs, at automatic or fixed substeps.
+fn cloth(stiff: bool, substeps: Option<u32>) -> Scene {
+    let mut s = hanging_cloth(N as u32);
+    s.dt = 1.0 / 60.0;
+    s.substeps = substeps;
+    s.integrator = Some("symplectic-euler".into());
+    let c = &mut s.cloths[0];
+    let spec = |k: f64| SpringSpec {
+        stiffness: Some(k),
+        damping: Some(0.01),
+        ..Default::default()
+    };
+    let hz = |f: f64| SpringSpec {
+        frequency: Some(f),
+        damping_ratio: Some(0.05),
+        ..Default::default()
+    };
+    if stiff {
+        c.structural = spec(1e4);
+        c.shear = Some(spec(1e4));
+        c.bend = Some(spec(1e3));
+    } else {
+        c.structural = hz(200.0);
+        c.shear = Some(hz(200.0));
+        c.bend = Some(hz(60.0));
+    }
+    s
+}
+
+/// The report: one table, every figure from this run.
+pub fn report(frames: u32) -> Result<String, String> {
+    let seconds = f64::from(frames) / 60.0;
+    let stiff = run(&cloth(true, None), frames)?;
+    let converged = run(&cloth(true, Some(2 * stiff.substeps)), frames)?;
+    let tethers = TetherSpec {
+        slack: 0.05,
+        anchors: 2,
+    };
+    let mut tethered = cloth(false, None);
+    tethered.cloths[0].tethers = Some(tethers);
+    let mut limited = tethered.clone();
+    limited.cloths[0].stretch_limit = Some(StretchLimit {
+        stretch: 0.125,
+        passes: 4,
+    });
+    let mut aired = cloth(false, None);
+    aired.cloths[0].air = Some(Aero {
+        density: 1.225,
+        drag: 1.0,
+        lift: 0.5,
+    });
+    let soft = run(&cloth(false, None), frames)?;
+    let t = run(&tethered, frames)?;
+    let l = run(&limited, frames)?;
+    let a = run(&aired, frames)?;
+    let mut out = format!(
+        "128×128 cloth, 1 m, 1 kg, two top corners pinned, {frames} frames of 1/60 s \
+         ({seconds:.2} s), symplectic Euler, {} thread(s)\n\
+         | cloth | substeps at the end | ms per frame | stiff's time over this | peak structural strain | RMS from the converged stiff cloth at {seconds:.2} s |\n\
+         |---|---|---|---|---|---|\n",
+        rayon::current_num_threads()
+    );
+    let row = |name: &str, r: &Run| {
+        format!(
+            "| {name} | {} | {:.2} | {:.1}× | {:.2} % | {:.2} cm |\n",
+            r.substeps,
+            1e3 * r.frame,
+            stiff.frame / r.frame,
+            100.0 * r.peak,
+            100.0 * rms(&r.end, &converged.end)
+        )
+    };
+    out += &row("stiff, k = 1e4 N/m, automatic substeps", &stiff);
+    out += &row("stiff, twice those (converged)", &converged);
+    out += &row("soft (200 Hz)", &soft);
+    out += &row("soft + tethers (slack 0.05, 2 anchors)", &t);
+    out += &row("soft + tethers + stretch limit (0.125, 4 passes)", &l);
+    out += &row("soft + air (still air)", &a);
+    let share = |d: Duration, r: &Run| 100.0 * d.as_secs_f64() / r.integrate.as_secs_f64();
+    out += &format!(
+        "tethers: {:.1} % of the spring stage's time; stretch limit: {:.1} %; air: {:.1} %\n",
+        share(t.tethers, &t),
+        share(l.stretch, &l),
+        share(a.air, &a)
+    );
+    Ok(out)
+}
