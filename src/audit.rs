@@ -329,6 +329,21 @@ impl Auditor {
         particles + springs
     }
 
+    /// `Σ U(x) − U(before)` over every spring: what moving the particles from `before` to
+    /// their places did to the springs' energy (J), in fixed order. A spring at a particle
+    /// gone non-finite is left out: that particle is the quarantine's.
+    pub fn spring_change(&mut self, packed: &Packed, before: &[DVec3]) -> f64 {
+        let x = &packed.x;
+        self.spring_sum(packed, |l| {
+            let change = spring_energy(x, l) - spring_energy(before, l);
+            if change.is_finite() {
+                change
+            } else {
+                0.0
+            }
+        })
+    }
+
     /// Keeps the state at a substep's start, for [`Self::damping`] and [`Self::force_work`]
     /// after it.
     pub fn begin_substep(&mut self, packed: &Packed) {
@@ -461,7 +476,7 @@ pub(crate) fn particle_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 
 
 /// A particle's kinetic and potential energy at `x`, `v` (0 for a pinned one, `inv` = 0).
 #[inline]
-fn particle_energy_at(inv: f64, x: DVec3, v: DVec3, gravity: DVec3) -> f64 {
+pub(crate) fn particle_energy_at(inv: f64, x: DVec3, v: DVec3, gravity: DVec3) -> f64 {
     if inv == 0.0 {
         return 0.0;
     }
@@ -477,7 +492,7 @@ pub(crate) fn spring_energy(x: &[DVec3], l: Link) -> f64 {
 
 /// `½ κ δ²` of one spring with its ends at `xa`, `xb`.
 #[inline]
-fn spring_energy_at(xa: DVec3, xb: DVec3, l: Link) -> f64 {
+pub(crate) fn spring_energy_at(xa: DVec3, xb: DVec3, l: Link) -> f64 {
     let d = (xb - xa).length() - l.rest;
     0.5 * l.stiffness * d * d
 }
@@ -550,62 +565,4 @@ pub(crate) fn local_energy(packed: &Packed, i: usize, gravity: DVec3) -> f64 {
     let mut e = particle_energy(packed, i, gravity);
     springs_at(packed, i, |l| e += spring_energy(&packed.x, l));
     e
-}
-
-/// The change of `E` a projection stage makes, from the particles it moved: each one's state
-/// kept the first time the stage moves it, then its own energy and its springs' compared with
-/// the state now (every spring once). Its cost follows the particles moved, not the cloth.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Ledger {
-    /// Per particle, its place in `kept`, or `u32::MAX`.
-    slot: Vec<u32>,
-    kept: Vec<(u32, DVec3, DVec3)>,
-}
-
-impl Ledger {
-    /// Sized for `n` particles (at gather), nothing kept.
-    pub(crate) fn resize(&mut self, n: usize) {
-        self.slot.clear();
-        self.slot.resize(n, u32::MAX);
-        self.kept.clear();
-    }
-
-    /// Keeps particle `i`'s state before the stage's first move of it.
-    #[inline]
-    pub(crate) fn keep(&mut self, packed: &Packed, i: usize) {
-        if self.slot[i] == u32::MAX {
-            self.slot[i] = self.kept.len() as u32;
-            self.kept.push((i as u32, packed.x[i], packed.v[i]));
-        }
-    }
-
-    /// The change of `E` since the particles kept were kept (J); then nothing is kept.
-    pub(crate) fn close(&mut self, packed: &Packed, gravity: DVec3) -> f64 {
-        let (slot, kept) = (&self.slot, &self.kept);
-        let before = |j: usize| match slot[j] {
-            u32::MAX => packed.x[j],
-            k => kept[k as usize].1,
-        };
-        let mut change = 0.0;
-        for &(i, x0, v0) in kept {
-            let i = i as usize;
-            let inv = packed.inv_mass[i];
-            change +=
-                particle_energy(packed, i, gravity) - particle_energy_at(inv, x0, v0, gravity);
-            springs_at(packed, i, |l| {
-                let other = if l.a == i { l.b } else { l.a };
-                // A spring between two moved particles counts at its lower end.
-                if other < i && slot[other] != u32::MAX {
-                    return;
-                }
-                change += spring_energy_at(packed.x[l.a], packed.x[l.b], l)
-                    - spring_energy_at(before(l.a), before(l.b), l);
-            });
-        }
-        for &(i, _, _) in &self.kept {
-            self.slot[i as usize] = u32::MAX;
-        }
-        self.kept.clear();
-        change
-    }
 }

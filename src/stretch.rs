@@ -13,7 +13,6 @@ use glam::DVec3;
 use hecs::World;
 use serde::{Deserialize, Serialize};
 
-use crate::audit::Ledger;
 use crate::buffers::Packed;
 use crate::components::{ClothSprings, MeshSurface};
 
@@ -79,7 +78,9 @@ pub(crate) struct StretchStage {
     bars: Vec<Bar>,
     /// Per limited cloth: its range of `bars` and its passes.
     cloths: Vec<(usize, usize, u32)>,
-    ledger: Ledger,
+    /// The state before the substep's passes.
+    before: Vec<DVec3>,
+    before_v: Vec<DVec3>,
     /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
     pub(crate) energy: f64,
 }
@@ -123,15 +124,21 @@ impl StretchStage {
         } else {
             packed.particle_count()
         };
-        self.ledger.resize(n);
+        self.before.resize(n, DVec3::ZERO);
+        self.before_v.resize(n, DVec3::ZERO);
     }
 
     pub(crate) fn is_empty(&self) -> bool {
         self.bars.is_empty()
     }
 
-    /// After a substep's springs: each limited cloth's passes over its springs.
-    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) {
+    /// After a substep's springs: each limited cloth's passes over its springs; the change of
+    /// the particles' own energy booked. Returns whether any moved: the springs' change, from
+    /// the positions [`Self::before`], is then the caller's to add.
+    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
+        self.before.copy_from_slice(&packed.x);
+        self.before_v.copy_from_slice(&packed.v);
+        let mut moved = false;
         for &(lo, hi, passes) in &self.cloths {
             for _ in 0..passes {
                 for &(a, b, longest) in &self.bars[lo..hi] {
@@ -143,8 +150,7 @@ impl StretchStage {
                     }
                     let (wa, wb) = (packed.inv_mass[a], packed.inv_mass[b]);
                     let w = wa + wb;
-                    self.ledger.keep(packed, a);
-                    self.ledger.keep(packed, b);
+                    moved = true;
                     let len = len2.sqrt();
                     let n = d / len;
                     let over = len - longest;
@@ -158,6 +164,24 @@ impl StretchStage {
                 }
             }
         }
-        self.energy += self.ledger.close(packed, gravity);
+        if moved {
+            let (inv, x, v) = (&packed.inv_mass, &packed.x, &packed.v);
+            let at = |i: usize, x: DVec3, v: DVec3| {
+                crate::audit::particle_energy_at(inv[i], x, v, gravity)
+            };
+            for (i, (xb, vb)) in self.before.iter().zip(&self.before_v).enumerate() {
+                let change = at(i, x[i], v[i]) - at(i, *xb, *vb);
+                // Unmoved (0), or gone non-finite: the quarantine's.
+                if change.is_finite() {
+                    self.energy += change;
+                }
+            }
+        }
+        moved
+    }
+
+    /// The positions before the last passes.
+    pub(crate) fn before(&self) -> &[DVec3] {
+        &self.before
     }
 }

@@ -112,11 +112,24 @@ pub fn build(world: &World, first: u32, count: u32, spec: &TetherSpec) -> Option
     Some(Tethers { first, links })
 }
 
+/// Particles per block of the tethers' parallel pass (the blocks' sums are added in block
+/// order: the same on any thread count).
+const BLOCK: usize = crate::audit::BLOCK;
+
 /// The simulation's tethers in packed indices, and what their projections did this frame.
 #[derive(Debug, Default)]
 pub(crate) struct TetherStage {
+    /// `(particle, anchor slot, limit)`, by particle.
     links: Vec<Link>,
-    ledger: crate::audit::Ledger,
+    /// Each anchor slot's packed index, and its state at the substep's projections.
+    anchors: Vec<u32>,
+    held: Vec<(DVec3, DVec3)>,
+    /// `links[starts[k]..starts[k + 1]]`: block `k`'s links.
+    starts: Vec<usize>,
+    /// The positions before the substep's projections, and each block's change of `E`.
+    before: Vec<DVec3>,
+    sums: Vec<f64>,
+    parallel: bool,
     /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
     pub(crate) energy: f64,
 }
@@ -125,6 +138,7 @@ impl TetherStage {
     /// Every cloth's tethers from `world`, in packed indices.
     pub(crate) fn gather(&mut self, world: &World, packed: &Packed) {
         self.links.clear();
+        self.anchors.clear();
         let mut cloths: Vec<(u32, Vec<Link>)> = world
             .query::<&Tethers>()
             .iter()
@@ -132,8 +146,6 @@ impl TetherStage {
             .collect();
         cloths.sort_unstable_by_key(|c| c.0);
         let n = packed.particle_count() as u32;
-        self.ledger
-            .resize(if cloths.is_empty() { 0 } else { n as usize });
         for (first, links) in cloths {
             self.links.extend(
                 (links.into_iter())
@@ -141,6 +153,25 @@ impl TetherStage {
                     .filter(|&(i, a, _)| i < n && a < n),
             );
         }
+        // By particle (stable: each particle's anchors keep their order), anchors by slot.
+        self.links.sort_by_key(|l| l.0);
+        self.anchors.extend(self.links.iter().map(|l| l.1));
+        self.anchors.sort_unstable();
+        self.anchors.dedup();
+        for l in &mut self.links {
+            l.1 = self.anchors.binary_search(&l.1).unwrap_or(0) as u32;
+        }
+        self.held
+            .resize(self.anchors.len(), (DVec3::ZERO, DVec3::ZERO));
+        let n = if self.links.is_empty() { 0 } else { n as usize };
+        let blocks = n.div_ceil(BLOCK);
+        self.starts.clear();
+        let links = &self.links;
+        self.starts
+            .extend((0..=blocks).map(|k| links.partition_point(|l| (l.0 as usize) < k * BLOCK)));
+        self.before.resize(n, DVec3::ZERO);
+        self.sums.resize(blocks, 0.0);
+        self.parallel = crate::integrate::runs_parallel(packed);
     }
 
     pub(crate) fn is_empty(&self) -> bool {
@@ -148,23 +179,61 @@ impl TetherStage {
     }
 
     /// After a substep's springs: every particle further than its limit from an anchor put
-    /// back on the sphere, its velocity away from the anchor (relative to the anchor's) removed.
-    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) {
-        for &(i, a, limit) in &self.links {
-            let (i, a) = (i as usize, a as usize);
-            let d = packed.x[i] - packed.x[a];
-            let len = d.length();
-            if len <= limit || !len.is_finite() || packed.inv_mass[i] == 0.0 {
-                continue;
-            }
-            self.ledger.keep(packed, i);
-            let n = d / len;
-            packed.x[i] = packed.x[a] + n * limit;
-            let away = (packed.v[i] - packed.v[a]).dot(n);
-            if away > 0.0 {
-                packed.v[i] -= away * n;
-            }
+    /// back on the sphere, its velocity away from the anchor (relative to the anchor's) removed,
+    /// block by block (a tether moves its particle only, never an anchor); the change of the
+    /// particles' own energy booked. Returns whether any moved: the springs' change, from the
+    /// positions [`Self::before`], is then the caller's to add.
+    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
+        use rayon::prelude::*;
+        for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
+            *h = (packed.x[a as usize], packed.v[a as usize]);
         }
-        self.energy += self.ledger.close(packed, gravity);
+        self.before.copy_from_slice(&packed.x);
+        let (links, starts, held) = (&self.links, &self.starts, &self.held);
+        let inv = &packed.inv_mass;
+        let pull = |k: usize, xs: &mut [DVec3], vs: &mut [DVec3]| -> f64 {
+            let base = k * BLOCK;
+            let mut change = 0.0;
+            for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
+                let (j, i) = (i as usize - base, i as usize);
+                let (ya, wa) = held[slot as usize];
+                let d = xs[j] - ya;
+                let len = d.length();
+                if len <= limit || !len.is_finite() || inv[i] == 0.0 {
+                    continue;
+                }
+                let was = crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity);
+                let n = d / len;
+                xs[j] = ya + n * limit;
+                let away = (vs[j] - wa).dot(n);
+                if away > 0.0 {
+                    vs[j] -= away * n;
+                }
+                change += crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity) - was;
+            }
+            change
+        };
+        let (x, v, sums) = (&mut packed.x, &mut packed.v, &mut self.sums);
+        if self.parallel {
+            (x.par_chunks_mut(BLOCK).zip(v.par_chunks_mut(BLOCK)))
+                .zip(sums.par_iter_mut())
+                .enumerate()
+                .for_each(|(k, ((xs, vs), s))| *s = pull(k, xs, vs));
+        } else {
+            (x.chunks_mut(BLOCK).zip(v.chunks_mut(BLOCK)))
+                .zip(sums.iter_mut())
+                .enumerate()
+                .for_each(|(k, ((xs, vs), s))| *s = pull(k, xs, vs));
+        }
+        let own: f64 = self.sums.iter().sum();
+        self.energy += own;
+        // Whether any particle moved (its springs' change is the caller's: the audit's pass).
+        let bits = |p: DVec3| p.to_array().map(f64::to_bits);
+        (packed.x.iter().zip(&self.before)).any(|(x, b)| bits(*x) != bits(*b))
+    }
+
+    /// The positions before the last projections.
+    pub(crate) fn before(&self) -> &[DVec3] {
+        &self.before
     }
 }

@@ -250,7 +250,9 @@ impl Run<'_> {
             (StageKind::Tethers, _) => {
                 self.state_to_host()?;
                 if let Some(t) = self.tethers.as_mut() {
-                    t.project(self.packed, self.gravity);
+                    if t.project(self.packed, self.gravity) {
+                        t.energy += self.auditor.spring_change(self.packed, t.before());
+                    }
                 }
                 self.host_moved();
                 self.charge(StageKind::Tethers);
@@ -258,7 +260,9 @@ impl Run<'_> {
             (StageKind::StretchLimit, _) => {
                 self.state_to_host()?;
                 if let Some(s) = self.stretch.as_mut() {
-                    s.project(self.packed, self.gravity);
+                    if s.project(self.packed, self.gravity) {
+                        s.energy += self.auditor.spring_change(self.packed, s.before());
+                    }
                 }
                 self.host_moved();
                 self.charge(StageKind::StretchLimit);
