@@ -360,18 +360,8 @@ impl MeshCloth {
     /// the cloth its topology gives (no triangle left, a region holding no vertex, a material
     /// beyond f32 at its reference mass).
     pub(super) fn check(&self, at: &str, limits: &super::Limits, is: &mut super::validate::Issues) {
-        if let Some(Err(e)) = self.air.map(|a| a.check()) {
-            is.push(format!("{at}.air"), e);
-        }
-        if let Some(Err(e)) = self.tethers.map(|t| t.check()) {
-            is.push(format!("{at}.tethers"), e);
-        }
-        if let Some(Err(e)) = self.stretch_limit.map(|t| t.check()) {
-            is.push(format!("{at}.stretch_limit"), e);
-        }
-        if let Some(Err(e)) = self.tearing.map(|t| t.check_beside(self.stretch_limit)) {
-            is.push(format!("{at}.tearing"), e);
-        }
+        let (limit, tearing) = (self.stretch_limit, self.tearing);
+        is.behaviour(at, self.air, self.tethers, limit, tearing);
         let before = is.0.len();
         let (n, t) = (self.vertices.len(), self.triangles.len());
         if n as u64 > limits.max_particles {

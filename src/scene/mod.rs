@@ -573,3 +573,27 @@ pub fn exercise(data: &[u8]) -> Result<crate::Diagnostics, crate::Error> {
     }
     Ok(sim.diagnostics())
 }
+
+impl validate::Issues {
+    /// A cloth's or mesh's behaviours beyond its springs, located under `at` (`cloths[0]`).
+    fn behaviour(
+        &mut self,
+        at: &str,
+        air: Option<crate::Aero>,
+        tethers: Option<crate::TetherSpec>,
+        limit: Option<crate::StretchLimit>,
+        tearing: Option<crate::Tearing>,
+    ) {
+        let checks = [
+            ("air", air.map(|a| a.check())),
+            ("tethers", tethers.map(|t| t.check())),
+            ("stretch_limit", limit.map(|l| l.check())),
+            ("tearing", tearing.map(|t| t.check_beside(limit))),
+        ];
+        for (field, check) in checks {
+            if let Some(Err(e)) = check {
+                self.push(format!("{at}.{field}"), e);
+            }
+        }
+    }
+}

@@ -238,18 +238,7 @@ impl Scene {
         }
         for (i, c) in self.cloths.iter().enumerate() {
             let at = format!("cloths[{i}]");
-            if let Some(Err(e)) = c.air.map(|a| a.check()) {
-                is.push(format!("{at}.air"), e);
-            }
-            if let Some(Err(e)) = c.tethers.map(|t| t.check()) {
-                is.push(format!("{at}.tethers"), e);
-            }
-            if let Some(Err(e)) = c.stretch_limit.map(|t| t.check()) {
-                is.push(format!("{at}.stretch_limit"), e);
-            }
-            if let Some(Err(e)) = c.tearing.map(|t| t.check_beside(c.stretch_limit)) {
-                is.push(format!("{at}.tearing"), e);
-            }
+            is.behaviour(&at, c.air, c.tethers, c.stretch_limit, c.tearing);
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);
