@@ -15,7 +15,7 @@ use std::collections::HashSet;
 use hecs::{Entity, World};
 use serde::{Deserialize, Serialize};
 
-use crate::buffers::Packed;
+use crate::buffers::{Packed, PackedSpring};
 use crate::components::{MeshSurface, Spring};
 
 /// A cloth's tearing, as a scene gives it (`tearing: Some((stretch: 0.5))`); a component on
@@ -69,8 +69,8 @@ pub(crate) struct TearStage {
     cloths: Vec<(Entity, u32, u32)>,
     /// `(index in Packed::springs, breaking length m)`.
     springs: Vec<(u32, f64)>,
-    /// The frame's breaks: indices in `Packed::springs`.
-    pub(crate) broken: Vec<u32>,
+    /// The frame's breaks: their ends (packed indices, the lower first), in springs' order.
+    pub(crate) broken: Vec<(u32, u32)>,
     /// The energy the broken springs held at the frame's end (J).
     pub(crate) energy: f64,
 }
@@ -105,34 +105,28 @@ impl TearStage {
         self.springs.is_empty()
     }
 
-    /// At the frame's end: the springs past their breaking length, and the energy they held.
-    pub(crate) fn find(&mut self, packed: &Packed) {
+    /// At the frame's end: the springs past their breaking length, and the energy they held;
+    /// each one left in `packed` as a spring of no length and no stiffness, so nothing that
+    /// reads the buffers before the next gather (the strain check) sees it.
+    pub(crate) fn find(&mut self, packed: &mut Packed) {
         self.broken.clear();
         self.energy = 0.0;
         for &(k, longest) in &self.springs {
-            let s = &packed.springs[k as usize];
-            let len2 = (packed.x[s.b as usize] - packed.x[s.a as usize]).length_squared();
+            let s = packed.springs[k as usize];
+            let (a, b) = (s.a as usize, s.b as usize);
             // A NaN length is the quarantine's, not a tear.
-            if len2 > longest * longest {
-                self.broken.push(k);
-                let d = len2.sqrt() - s.rest;
-                self.energy += 0.5 * s.stiffness * d * d;
+            if (packed.x[b] - packed.x[a]).length_squared() > longest * longest {
+                self.broken.push((s.a.min(s.b), s.a.max(s.b)));
+                self.energy +=
+                    crate::audit::spring_energy_at(packed.x[a], packed.x[b], (&s).into());
+                packed.springs[k as usize] = PackedSpring {
+                    b: s.a,
+                    stiffness: 0.0,
+                    damping: 0.0,
+                    ..s
+                };
             }
         }
-    }
-
-    /// Whether the springs other than the frame's broken ones stretch past `limit` (the
-    /// strain check, where a break was found).
-    pub(crate) fn beyond_unbroken(&self, packed: &Packed, limit: f64) -> bool {
-        let k2 = (1.0 + limit) * (1.0 + limit);
-        let (x, inv) = (&packed.x, &packed.inv_mass);
-        packed.all_springs().enumerate().any(|(k, s)| {
-            let (a, b) = (s.a as usize, s.b as usize);
-            let d2 = (x[b] - x[a]).length_squared();
-            (d2 > k2 * s.rest * s.rest || d2.is_nan())
-                && !(inv[a] == 0.0 && inv[b] == 0.0)
-                && self.broken.binary_search(&(k as u32)).is_err()
-        })
     }
 
     /// The frame's breaks into `world`: the springs despawned, the triangles with a broken
@@ -144,11 +138,7 @@ impl TearStage {
         packed: &Packed,
         out: &mut Vec<(Entity, u32, u32)>,
     ) {
-        let ends = |k: &u32| {
-            let s = &packed.springs[*k as usize];
-            (s.a.min(s.b), s.a.max(s.b))
-        };
-        let pairs: HashSet<(u32, u32)> = self.broken.iter().map(ends).collect();
+        let pairs: HashSet<(u32, u32)> = self.broken.iter().copied().collect();
         let entities = &packed.topology.entities;
         let by_entity: HashSet<(Entity, Entity)> = (pairs.iter())
             .flat_map(|&(a, b)| {
@@ -176,8 +166,7 @@ impl TearStage {
                     .retain(|&[a, b, c]| !(broken(a, b) || broken(b, c) || broken(c, a)));
             }
         }
-        for k in &self.broken {
-            let (a, b) = ends(k);
+        for &(a, b) in &self.broken {
             let c = self.cloths.partition_point(|c| c.1 <= a);
             if let Some(&(e, _, _)) = c.checked_sub(1).and_then(|c| self.cloths.get(c)) {
                 out.push((e, a, b));

@@ -202,18 +202,15 @@ impl Simulation {
                 h = dt / more as f64;
                 run.prepare(h)?;
             };
-            // The tearing stage, at the frame's end: the springs it breaks leave `E`.
+            // The tearing stage, at the frame's end: the springs it breaks leave `E` (and the
+            // buffers, for the strain check below).
             if let Some(t) = run.tear.as_mut() {
                 t.find(run.packed);
                 end -= t.energy;
             }
             run.book_frame();
-            // The strain check reads the frame's end state inside the same job (a spring that
-            // broke is gone).
-            let mut beyond = limit.is_finite() && crate::metrics::beyond(run.packed, limit);
-            if let Some(t) = run.tear.as_ref().filter(|t| beyond && !t.broken.is_empty()) {
-                beyond = t.beyond_unbroken(run.packed, limit);
-            }
+            // The strain check reads the frame's end state inside the same job.
+            let beyond = limit.is_finite() && crate::metrics::beyond(run.packed, limit);
             Ok::<_, SimError>((end, beyond))
         };
         let (end, beyond) = if self.parallel {
