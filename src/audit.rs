@@ -11,10 +11,38 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::buffers::{Packed, PackedSpring};
+use crate::components::GridLink;
 use crate::config::Integrator;
 
 /// Elements per block of the audit's fixed-order sums.
 pub(crate) const BLOCK: usize = 4096;
+
+/// The particles a projection (tethers, stretch limits) moved this substep, and where each
+/// was before it: the springs' change is then evaluated at those particles' springs only.
+#[derive(Debug, Default)]
+pub(crate) struct Moves {
+    /// Each particle's position before its first move (stale where not `moved`).
+    pub(crate) before: Vec<DVec3>,
+    pub(crate) moved: Vec<bool>,
+}
+
+impl Moves {
+    /// None moved yet, for `n` particles.
+    pub(crate) fn reset(&mut self, n: usize) {
+        self.before.resize(n, DVec3::ZERO);
+        self.moved.clear();
+        self.moved.resize(n, false);
+    }
+
+    /// Keeps where particle `i` was, at its first move.
+    #[inline]
+    pub(crate) fn mark(moved: &mut bool, before: &mut DVec3, x: DVec3) {
+        if !*moved {
+            *moved = true;
+            *before = x;
+        }
+    }
+}
 
 /// The energy books of a frame ([`crate::StepStats::audit`]) or of the run so far
 /// ([`crate::Diagnostics::audit`]), in joules. The audited system is the cloth: its energy
@@ -279,6 +307,30 @@ impl Auditor {
         grids_too: bool,
         f: impl Fn(Link) -> f64 + Sync + Send,
     ) -> f64 {
+        let row = |l: &GridLink, (a, b, n): (usize, usize, usize), mut acc: f64| {
+            for k in 0..n {
+                acc += f(Link {
+                    a: a + k,
+                    b: b + k,
+                    rest: l.rest_length,
+                    stiffness: l.stiffness,
+                    damping: l.damping,
+                });
+            }
+            acc
+        };
+        self.spring_sum_by_rows(packed, grids_too, &f, row)
+    }
+
+    /// As [`Self::spring_sum_of`], a grid link's row of `n` springs `(a + k, b + k)` added
+    /// to the block's sum by `row` (in order: the same bits as `f` spring by spring).
+    fn spring_sum_by_rows(
+        &mut self,
+        packed: &Packed,
+        grids_too: bool,
+        f: impl Fn(Link) -> f64 + Sync + Send,
+        row: impl Fn(&GridLink, (usize, usize, usize), f64) -> f64 + Sync + Send,
+    ) -> f64 {
         let blocks = &self.blocks;
         let grids = &packed.topology.grids;
         let block = |k: usize| -> f64 {
@@ -296,15 +348,7 @@ impl Auditor {
                         let Some((a, b, n)) = grid.link_row(l, r) else {
                             continue;
                         };
-                        for k in 0..n {
-                            acc += f(Link {
-                                a: (a + k) as usize,
-                                b: (b + k) as usize,
-                                rest: l.rest_length,
-                                stiffness: l.stiffness,
-                                damping: l.damping,
-                            });
-                        }
+                        acc = row(l, (a as usize, b as usize, n as usize), acc);
                     }
                 }
             }
@@ -329,19 +373,26 @@ impl Auditor {
         particles + springs
     }
 
-    /// `Σ U(x) − U(before)` over every spring: what moving the particles from `before` to
-    /// their places did to the springs' energy (J), in fixed order. A spring at a particle
-    /// gone non-finite is left out: that particle is the quarantine's.
-    pub fn spring_change(&mut self, packed: &Packed, before: &[DVec3]) -> f64 {
-        let x = &packed.x;
-        self.spring_sum(packed, |l| {
-            let change = spring_energy(x, l) - spring_energy(before, l);
+    /// `Σ U(x) − U(before)` over every spring: what a projection's `moves` did to the
+    /// springs' energy (J), in fixed order. A spring with neither end moved changed by an
+    /// exact 0 and is not evaluated; one at a particle gone non-finite is left out: that
+    /// particle is the quarantine's.
+    pub(crate) fn spring_change(&mut self, packed: &Packed, moves: &Moves) -> f64 {
+        let (x, moved, before) = (&packed.x, &moves.moved, &moves.before);
+        let was = |i: usize| if moved[i] { before[i] } else { x[i] };
+        let one = |l: Link| {
+            if !(moved[l.a] || moved[l.b]) {
+                return 0.0;
+            }
+            let change = spring_energy(x, l) - spring_energy_at(was(l.a), was(l.b), l);
             if change.is_finite() {
                 change
             } else {
                 0.0
             }
-        })
+        };
+        let row = |l: &GridLink, ends, acc| row_change(x, moves, l, ends, acc);
+        self.spring_sum_by_rows(packed, true, one, row)
     }
 
     /// Keeps the state at a substep's start, for [`Self::damping`] and [`Self::force_work`]
@@ -489,6 +540,56 @@ pub(crate) fn particle_energy_at(inv: f64, x: DVec3, v: DVec3, gravity: DVec3) -
 pub(crate) fn spring_energy(x: &[DVec3], l: Link) -> f64 {
     spring_energy_at(x[l.a], x[l.b], l)
 }
+
+/// `acc` plus `Σ U(x) − U(before)` over a grid link's row of `n` springs `(a + k, b + k)` (as
+/// [`Auditor::spring_change`] spring by spring, the same bits): lanes of [`LANES`] springs, a
+/// lane with no end moved skipped (its change an exact 0), the others' changes evaluated side
+/// by side and added in order.
+fn row_change(
+    x: &[DVec3],
+    m: &Moves,
+    l: &GridLink,
+    (a, b, n): (usize, usize, usize),
+    mut acc: f64,
+) -> f64 {
+    let (rest, half_k) = (l.rest_length, 0.5 * l.stiffness);
+    let energy = |d2: f64| {
+        let d = d2.sqrt() - rest;
+        half_k * d * d
+    };
+    let (moved, before) = (&m.moved, &m.before);
+    let mut k = 0;
+    while k < n {
+        let w = LANES.min(n - k);
+        let (ma, mb) = (&moved[a + k..a + k + w], &moved[b + k..b + k + w]);
+        if ma.iter().chain(mb).any(|&t| t) {
+            let (xa, xb) = (&x[a + k..a + k + w], &x[b + k..b + k + w]);
+            let (ba, bb) = (&before[a + k..a + k + w], &before[b + k..b + k + w]);
+            let mut now = [0.0; LANES];
+            let mut was = [0.0; LANES];
+            for j in 0..w {
+                now[j] = (xb[j] - xa[j]).length_squared();
+                let pa = if ma[j] { ba[j] } else { xa[j] };
+                let pb = if mb[j] { bb[j] } else { xb[j] };
+                was[j] = (pb - pa).length_squared();
+            }
+            let mut changes = [0.0; LANES];
+            for j in 0..LANES {
+                changes[j] = energy(now[j]) - energy(was[j]);
+            }
+            for &change in &changes[..w] {
+                if change.is_finite() {
+                    acc += change;
+                }
+            }
+        }
+        k += w;
+    }
+    acc
+}
+
+/// Springs side by side in [`row_change`].
+const LANES: usize = 8;
 
 /// `½ κ δ²` of one spring with its ends at `xa`, `xb`.
 #[inline]

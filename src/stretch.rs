@@ -78,8 +78,8 @@ pub(crate) struct StretchStage {
     bars: Vec<Bar>,
     /// Per limited cloth: its range of `bars` and its passes.
     cloths: Vec<(usize, usize, u32)>,
-    /// The state before the substep's passes.
-    before: Vec<DVec3>,
+    /// What the substep's passes moved, and the moved particles' velocities before them.
+    moves: crate::audit::Moves,
     before_v: Vec<DVec3>,
     /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
     pub(crate) energy: f64,
@@ -124,7 +124,7 @@ impl StretchStage {
         } else {
             packed.particle_count()
         };
-        self.before.resize(n, DVec3::ZERO);
+        self.moves.reset(n);
         self.before_v.resize(n, DVec3::ZERO);
     }
 
@@ -134,10 +134,17 @@ impl StretchStage {
 
     /// After a substep's springs: each limited cloth's passes over its springs; the change of
     /// the particles' own energy booked. Returns whether any moved: the springs' change, from
-    /// the positions [`Self::before`], is then the caller's to add.
+    /// [`Self::moves`], is then the caller's to add.
     pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
-        self.before.copy_from_slice(&packed.x);
-        self.before_v.copy_from_slice(&packed.v);
+        let n = self.moves.moved.len();
+        self.moves.reset(n);
+        let (moves, before_v) = (&mut self.moves, &mut self.before_v);
+        let mut mark = |i: usize, x: DVec3, v: DVec3| {
+            if !moves.moved[i] {
+                before_v[i] = v;
+            }
+            crate::audit::Moves::mark(&mut moves.moved[i], &mut moves.before[i], x);
+        };
         let mut moved = false;
         for &(lo, hi, passes) in &self.cloths {
             for _ in 0..passes {
@@ -151,6 +158,8 @@ impl StretchStage {
                     let (wa, wb) = (packed.inv_mass[a], packed.inv_mass[b]);
                     let w = wa + wb;
                     moved = true;
+                    mark(a, packed.x[a], packed.v[a]);
+                    mark(b, packed.x[b], packed.v[b]);
                     let len = len2.sqrt();
                     let n = d / len;
                     let over = len - longest;
@@ -169,9 +178,10 @@ impl StretchStage {
             let at = |i: usize, x: DVec3, v: DVec3| {
                 crate::audit::particle_energy_at(inv[i], x, v, gravity)
             };
-            for (i, (xb, vb)) in self.before.iter().zip(&self.before_v).enumerate() {
-                let change = at(i, x[i], v[i]) - at(i, *xb, *vb);
-                // Unmoved (0), or gone non-finite: the quarantine's.
+            let (moved, before) = (&self.moves.moved, &self.moves.before);
+            for i in (0..moved.len()).filter(|&i| moved[i]) {
+                let change = at(i, x[i], v[i]) - at(i, before[i], self.before_v[i]);
+                // Gone non-finite: the quarantine's.
                 if change.is_finite() {
                     self.energy += change;
                 }
@@ -180,8 +190,8 @@ impl StretchStage {
         moved
     }
 
-    /// The positions before the last passes.
-    pub(crate) fn before(&self) -> &[DVec3] {
-        &self.before
+    /// What the last passes moved.
+    pub(crate) fn moves(&self) -> &crate::audit::Moves {
+        &self.moves
     }
 }

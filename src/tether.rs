@@ -126,9 +126,10 @@ pub(crate) struct TetherStage {
     held: Vec<(DVec3, DVec3)>,
     /// `links[starts[k]..starts[k + 1]]`: block `k`'s links.
     starts: Vec<usize>,
-    /// The positions before the substep's projections, and each block's change of `E`.
-    before: Vec<DVec3>,
-    sums: Vec<f64>,
+    /// What the substep's projections moved, and each block's change of `E` and whether it
+    /// moved any.
+    moves: crate::audit::Moves,
+    sums: Vec<(f64, bool)>,
     parallel: bool,
     /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
     pub(crate) energy: f64,
@@ -169,8 +170,8 @@ impl TetherStage {
         let links = &self.links;
         self.starts
             .extend((0..=blocks).map(|k| links.partition_point(|l| (l.0 as usize) < k * BLOCK)));
-        self.before.resize(n, DVec3::ZERO);
-        self.sums.resize(blocks, 0.0);
+        self.moves.reset(n);
+        self.sums.resize(blocks, (0.0, false));
         self.parallel = crate::integrate::runs_parallel(packed);
     }
 
@@ -181,59 +182,68 @@ impl TetherStage {
     /// After a substep's springs: every particle further than its limit from an anchor put
     /// back on the sphere, its velocity away from the anchor (relative to the anchor's) removed,
     /// block by block (a tether moves its particle only, never an anchor); the change of the
-    /// particles' own energy booked. Returns whether any moved: the springs' change, from the
-    /// positions [`Self::before`], is then the caller's to add.
+    /// particles' own energy booked. Returns whether any moved: the springs' change, from
+    /// [`Self::moves`], is then the caller's to add.
     pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
         use rayon::prelude::*;
         for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
             *h = (packed.x[a as usize], packed.v[a as usize]);
         }
-        self.before.copy_from_slice(&packed.x);
+        let n = self.moves.moved.len();
+        self.moves.reset(n);
         let (links, starts, held) = (&self.links, &self.starts, &self.held);
         let inv = &packed.inv_mass;
-        let pull = |k: usize, xs: &mut [DVec3], vs: &mut [DVec3]| -> f64 {
-            let base = k * BLOCK;
-            let mut change = 0.0;
-            for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
-                let (j, i) = (i as usize - base, i as usize);
-                let (ya, wa) = held[slot as usize];
-                let d = xs[j] - ya;
-                let len = d.length();
-                if len <= limit || !len.is_finite() || inv[i] == 0.0 {
-                    continue;
+        let pull =
+            |k: usize, xs: &mut [DVec3], vs: &mut [DVec3], bs: &mut [DVec3], ms: &mut [bool]| {
+                let base = k * BLOCK;
+                let (mut change, mut any) = (0.0, false);
+                for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
+                    let (j, i) = (i as usize - base, i as usize);
+                    let (ya, wa) = held[slot as usize];
+                    let d = xs[j] - ya;
+                    // Well within: no root taken (the margin keeps `len <= limit` below exact).
+                    if d.length_squared() < limit * limit * (1.0 - 1e-12) {
+                        continue;
+                    }
+                    let len = d.length();
+                    if len <= limit || !len.is_finite() || inv[i] == 0.0 {
+                        continue;
+                    }
+                    let was = crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity);
+                    crate::audit::Moves::mark(&mut ms[j], &mut bs[j], xs[j]);
+                    any = true;
+                    let n = d / len;
+                    xs[j] = ya + n * limit;
+                    let away = (vs[j] - wa).dot(n);
+                    if away > 0.0 {
+                        vs[j] -= away * n;
+                    }
+                    change += crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity) - was;
                 }
-                let was = crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity);
-                let n = d / len;
-                xs[j] = ya + n * limit;
-                let away = (vs[j] - wa).dot(n);
-                if away > 0.0 {
-                    vs[j] -= away * n;
-                }
-                change += crate::audit::particle_energy_at(inv[i], xs[j], vs[j], gravity) - was;
-            }
-            change
-        };
+                (change, any)
+            };
         let (x, v, sums) = (&mut packed.x, &mut packed.v, &mut self.sums);
+        let (bs, ms) = (&mut self.moves.before, &mut self.moves.moved);
         if self.parallel {
             (x.par_chunks_mut(BLOCK).zip(v.par_chunks_mut(BLOCK)))
+                .zip(bs.par_chunks_mut(BLOCK).zip(ms.par_chunks_mut(BLOCK)))
                 .zip(sums.par_iter_mut())
                 .enumerate()
-                .for_each(|(k, ((xs, vs), s))| *s = pull(k, xs, vs));
+                .for_each(|(k, (((xs, vs), (bs, ms)), s))| *s = pull(k, xs, vs, bs, ms));
         } else {
             (x.chunks_mut(BLOCK).zip(v.chunks_mut(BLOCK)))
+                .zip(bs.chunks_mut(BLOCK).zip(ms.chunks_mut(BLOCK)))
                 .zip(sums.iter_mut())
                 .enumerate()
-                .for_each(|(k, ((xs, vs), s))| *s = pull(k, xs, vs));
+                .for_each(|(k, (((xs, vs), (bs, ms)), s))| *s = pull(k, xs, vs, bs, ms));
         }
-        let own: f64 = self.sums.iter().sum();
+        let own: f64 = self.sums.iter().map(|s| s.0).sum();
         self.energy += own;
-        // Whether any particle moved (its springs' change is the caller's: the audit's pass).
-        let bits = |p: DVec3| p.to_array().map(f64::to_bits);
-        (packed.x.iter().zip(&self.before)).any(|(x, b)| bits(*x) != bits(*b))
+        self.sums.iter().any(|s| s.1)
     }
 
-    /// The positions before the last projections.
-    pub(crate) fn before(&self) -> &[DVec3] {
-        &self.before
+    /// What the last projections moved.
+    pub(crate) fn moves(&self) -> &crate::audit::Moves {
+        &self.moves
     }
 }

@@ -193,3 +193,34 @@ fn tethers_are_the_same_on_1_and_2_threads() {
     assert!(runs[0].2.limits > 0.0, "{:?}", runs[0].2);
     assert!(runs[0] == runs[1]);
 }
+
+/// The books of a grid cloth's projections (its springs by grid rows) agree with those of the
+/// same cloth built spring by spring (a tearable cloth, its threshold never reached): the
+/// springs' change is evaluated only where a particle moved, in both.
+#[test]
+fn a_grid_books_its_tethers_as_its_springs_one_by_one() {
+    let tethers = ", tethers: Some((slack: 0.05, anchors: 2))";
+    let run = |extra: &str| {
+        let mut sim = Simulation::from_scene(&soft_cloth(extra, "cpu")).unwrap();
+        for _ in 0..20 {
+            sim.step().unwrap();
+        }
+        (sim.diagnostics().audit, sim.positions().to_vec())
+    };
+    let (grid, xg) = run(tethers);
+    let (loose, xl) = run(&format!("{tethers}, tearing: Some((stretch: 100.0))"));
+    let apart = xg
+        .iter()
+        .zip(&xl)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    println!(
+        "limits: grid {:.12e} J, one by one {:.12e} J; residuals {:.3e}, {:.3e} J; states {apart:.1e} m apart",
+        grid.limits, loose.limits, grid.residual, loose.residual
+    );
+    assert!(apart < 1e-9, "the two builds step alike: {apart} m");
+    assert!(grid.limits > 1e-3, "the tethers work: {}", grid.limits);
+    let rel = (grid.limits - loose.limits).abs() / grid.limits;
+    assert!(rel < 1e-9, "{} against {}", grid.limits, loose.limits);
+    assert!((grid.residual - loose.residual).abs() < 1e-9 * grid.limits);
+}

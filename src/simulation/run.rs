@@ -251,7 +251,7 @@ impl Run<'_> {
                 self.state_to_host()?;
                 if let Some(t) = self.tethers.as_mut() {
                     if t.project(self.packed, self.gravity) {
-                        t.energy += self.auditor.spring_change(self.packed, t.before());
+                        t.energy += self.auditor.spring_change(self.packed, t.moves());
                     }
                 }
                 self.host_moved();
@@ -261,7 +261,7 @@ impl Run<'_> {
                 self.state_to_host()?;
                 if let Some(s) = self.stretch.as_mut() {
                     if s.project(self.packed, self.gravity) {
-                        s.energy += self.auditor.spring_change(self.packed, s.before());
+                        s.energy += self.auditor.spring_change(self.packed, s.moves());
                     }
                 }
                 self.host_moved();

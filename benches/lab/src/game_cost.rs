@@ -24,6 +24,10 @@ struct Run {
     tethers: Duration,
     stretch: Duration,
     air: Duration,
+    /// The audit's, the gather's and the scatter's time summed.
+    audit: Duration,
+    gather: Duration,
+    scatter: Duration,
 }
 
 /// The worst stretch of the cloth's structural springs (rest 1/127 m), a share of rest.
@@ -55,6 +59,9 @@ fn run(scene: &Scene, frames: u32) -> Result<Run, String> {
         tethers: Duration::ZERO,
         stretch: Duration::ZERO,
         air: Duration::ZERO,
+        audit: Duration::ZERO,
+        gather: Duration::ZERO,
+        scatter: Duration::ZERO,
     };
     let mut wall = Duration::ZERO;
     for _ in 0..frames {
@@ -65,6 +72,9 @@ fn run(scene: &Scene, frames: u32) -> Result<Run, String> {
         r.tethers += s.stages[StageKind::Tethers];
         r.stretch += s.stages[StageKind::StretchLimit];
         r.air += s.stages[StageKind::Air] + s.stages[StageKind::Forces];
+        r.audit += s.audit_time;
+        r.gather += s.gather;
+        r.scatter += s.scatter;
         r.peak = r.peak.max(peak_strain(sim.positions()));
     }
     if let Some(f) = sim.diagnostics().failure {
@@ -170,5 +180,27 @@ pub fn report(frames: u32) -> Result<String, String> {
         share(l.stretch, &l),
         share(a.air, &a)
     );
+    out += "where a frame's time goes (ms per frame)\n\
+            | cloth | integrate | tethers | stretch limit | air | audit | gather + scatter | other |\n\
+            |---|---|---|---|---|---|---|---|\n";
+    let ms = |d: Duration| 1e3 * d.as_secs_f64() / f64::from(frames);
+    let split = |name: &str, r: &Run| {
+        let known = r.integrate + r.tethers + r.stretch + r.air + r.audit + r.gather + r.scatter;
+        format!(
+            "| {name} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+            ms(r.integrate),
+            ms(r.tethers),
+            ms(r.stretch),
+            ms(r.air),
+            ms(r.audit),
+            ms(r.gather + r.scatter),
+            (1e3 * r.frame - ms(known)).max(0.0)
+        )
+    };
+    out += &split("stiff, automatic substeps", &stiff);
+    out += &split("soft", &soft);
+    out += &split("soft + tethers", &t);
+    out += &split("soft + tethers + stretch limit", &l);
+    out += &split("soft + air", &a);
     Ok(out)
 }
