@@ -137,7 +137,7 @@ pub fn report(frames: u32) -> Result<String, String> {
     tethered.cloths[0].tethers = Some(tethers);
     let mut limited = tethered.clone();
     limited.cloths[0].stretch_limit = Some(StretchLimit {
-        stretch: 0.125,
+        stretch: 0.07,
         passes: 4,
     });
     let mut aired = cloth(false, None);
@@ -171,7 +171,7 @@ pub fn report(frames: u32) -> Result<String, String> {
     out += &row("stiff, twice those (converged)", &converged);
     out += &row("soft (200 Hz)", &soft);
     out += &row("soft + tethers (slack 0.05, 2 anchors)", &t);
-    out += &row("soft + tethers + stretch limit (0.125, 4 passes)", &l);
+    out += &row("soft + tethers + stretch limit (0.07, 4 passes)", &l);
     out += &row("soft + air (still air)", &a);
     let share = |d: Duration, r: &Run| 100.0 * d.as_secs_f64() / r.integrate.as_secs_f64();
     out += &format!(
