@@ -36,6 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         tethers: None,
         stretch_limit: None,
         tearing: None,
+        self_collision: None,
     });
     // Validation reports every problem with its location, as for a RON file.
     if let Some(issue) = scene.validate().first() {

@@ -78,6 +78,7 @@ pub fn hanging_cloth(n: u32) -> Scene {
             tethers: None,
             stretch_limit: None,
             tearing: None,
+            self_collision: None,
         }],
         ..Scene::new(1e-4)
     }

@@ -37,6 +37,7 @@
 pub mod air;
 mod audit;
 mod buffers;
+mod collide;
 mod components;
 mod config;
 mod contacts;
@@ -65,6 +66,7 @@ pub mod math {
 
 pub use air::{Aero, Gust, Wind};
 pub use audit::EnergyAudit;
+pub use collide::{Layer, SelfCollision};
 pub use components::{
     ClothGrid, ClothSprings, GridLink, MeshSurface, Particle, Pin, Quarantined, SceneIndex, Spring,
 };

@@ -45,7 +45,7 @@ impl BuiltScene {
 /// passed validation.
 pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Entity {
     let e = spawn(world, first, |b| b.cloth(cloth));
-    tie(world, e, cloth.tethers);
+    tie(world, e, cloth.tethers, cloth.self_collision);
     e
 }
 
@@ -54,23 +54,30 @@ pub fn spawn_cloth(world: &mut World, first: u32, cloth: &Cloth) -> Entity {
 /// must have passed validation.
 pub fn spawn_mesh(world: &mut World, first: u32, mesh: &MeshCloth) -> Entity {
     let e = spawn(world, first, |b| b.mesh(mesh, "mesh"));
-    tie(world, e, mesh.tethers);
+    tie(world, e, mesh.tethers, mesh.self_collision);
     e
 }
 
-/// The tethers `spec` asks for on the cloth (or mesh) entity `e`, from its particles' places
-/// and pins as they are (its rest shape, once its pins and attachments are set).
-fn tie(world: &mut World, e: Entity, spec: Option<crate::TetherSpec>) {
-    let Some(spec) = spec else {
-        return;
-    };
+/// The tethers `spec` and the collision layer `collide` ask for on the cloth (or mesh) entity
+/// `e`, from its particles' places and pins as they are (its rest shape, once its pins and
+/// attachments are set).
+fn tie(
+    world: &mut World,
+    e: Entity,
+    spec: Option<crate::TetherSpec>,
+    collide: Option<crate::SelfCollision>,
+) {
     let range = match (world.get::<&ClothSprings>(e), world.get::<&MeshSurface>(e)) {
         (Ok(c), _) => (c.grid.first, (c.grid.cols * c.grid.rows)),
         (_, Ok(m)) => (m.first, m.count),
         _ => return,
     };
-    if let Some(t) = crate::tether::build(world, range.0, range.1, &spec) {
+    if let Some(t) = spec.and_then(|s| crate::tether::build(world, range.0, range.1, &s)) {
         let _ = world.insert_one(e, t);
+    }
+    if let Some(c) = collide {
+        let layer = crate::collide::layer(world, range.0, range.1, c);
+        let _ = world.insert_one(e, layer);
     }
 }
 
@@ -387,10 +394,10 @@ impl Scene {
             .and_then(|n| n.parse::<Integrator>().ok())
             .unwrap_or_default();
         let props = self.build_props(&mut b.world, &b.hung);
-        let specs =
-            (self.cloths.iter().map(|c| c.tethers)).chain(self.meshes.iter().map(|m| m.tethers));
-        for (&e, spec) in b.cloths.iter().zip(specs) {
-            tie(&mut b.world, e, spec);
+        let specs = (self.cloths.iter().map(|c| (c.tethers, c.self_collision)))
+            .chain(self.meshes.iter().map(|m| (m.tethers, m.self_collision)));
+        for (&e, (spec, collide)) in b.cloths.iter().zip(specs) {
+            tie(&mut b.world, e, spec, collide);
         }
         BuiltScene {
             props,

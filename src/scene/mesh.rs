@@ -76,6 +76,10 @@ pub struct MeshCloth {
     /// Its springs break past a stretch (`(stretch)`); none: it does not tear.
     #[serde(default)]
     pub tearing: Option<crate::Tearing>,
+    /// Collision of its particles with each other and other colliding cloths' (`(thickness,
+    /// friction)`); none: it passes through itself.
+    #[serde(default)]
+    pub self_collision: Option<crate::SelfCollision>,
     /// The per-vertex values of the glTF attributes its pins name ([`MeshPin::Attribute`]),
     /// read with its file; not written to a scene.
     #[serde(skip)]
@@ -360,8 +364,15 @@ impl MeshCloth {
     /// the cloth its topology gives (no triangle left, a region holding no vertex, a material
     /// beyond f32 at its reference mass).
     pub(super) fn check(&self, at: &str, limits: &super::Limits, is: &mut super::validate::Issues) {
-        let (limit, tearing) = (self.stretch_limit, self.tearing);
-        is.behaviour(at, self.air, self.tethers, limit, tearing);
+        let behaviour = super::behaviour::Behaviour {
+            air: self.air,
+            tethers: self.tethers,
+            limit: self.stretch_limit,
+            tearing: self.tearing,
+            collide: self.self_collision,
+            spacing: None,
+        };
+        is.behaviour(at, behaviour);
         let before = is.0.len();
         let (n, t) = (self.vertices.len(), self.triangles.len());
         if n as u64 > limits.max_particles {
@@ -466,6 +477,18 @@ impl MeshCloth {
                 "every triangle has no area once welded: no cloth is left",
             );
             return;
+        }
+        if let Some(c) = self.self_collision.filter(|c| c.check().is_ok()) {
+            let p = &topology.positions;
+            let edge = |[a, b]: [u32; 2]| (p[b as usize] - p[a as usize]).length();
+            let spacing = topology
+                .edges
+                .iter()
+                .map(|&e| edge(e))
+                .fold(f64::MAX, f64::min);
+            if let Err(e) = c.check_spacing(spacing) {
+                is.push(format!("{at}.self_collision"), e);
+            }
         }
         for (j, pin) in self.pins.iter().enumerate() {
             if let MeshPin::Attribute(name, least) = pin {

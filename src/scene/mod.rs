@@ -14,6 +14,7 @@
 //! `ζ = c/(2√(κμ))`, hence `κ = μ (2πf)²` and `c = 2 ζ μ (2πf)`. With `stiffness` given,
 //! `damping_ratio` means `c = 2 ζ √(κ μ)`.
 
+mod behaviour;
 mod build;
 pub use build::{spawn_cloth, spawn_mesh};
 pub mod mesh;
@@ -391,6 +392,10 @@ pub struct Cloth {
     /// cloth keeps its springs one by one (built as a mesh of its grid).
     #[serde(default)]
     pub tearing: Option<crate::Tearing>,
+    /// Collision of its particles with each other and other colliding cloths' (`(thickness,
+    /// friction)`); none: it passes through itself.
+    #[serde(default)]
+    pub self_collision: Option<crate::SelfCollision>,
 }
 
 /// A rope or chain of equal particles from `start` to `end`.
@@ -572,28 +577,4 @@ pub fn exercise(data: &[u8]) -> Result<crate::Diagnostics, crate::Error> {
         sim.step()?;
     }
     Ok(sim.diagnostics())
-}
-
-impl validate::Issues {
-    /// A cloth's or mesh's behaviours beyond its springs, located under `at` (`cloths[0]`).
-    fn behaviour(
-        &mut self,
-        at: &str,
-        air: Option<crate::Aero>,
-        tethers: Option<crate::TetherSpec>,
-        limit: Option<crate::StretchLimit>,
-        tearing: Option<crate::Tearing>,
-    ) {
-        let checks = [
-            ("air", air.map(|a| a.check())),
-            ("tethers", tethers.map(|t| t.check())),
-            ("stretch_limit", limit.map(|l| l.check())),
-            ("tearing", tearing.map(|t| t.check_beside(limit))),
-        ];
-        for (field, check) in checks {
-            if let Some(Err(e)) = check {
-                self.push(format!("{at}.{field}"), e);
-            }
-        }
-    }
 }

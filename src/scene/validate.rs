@@ -238,7 +238,7 @@ impl Scene {
         }
         for (i, c) in self.cloths.iter().enumerate() {
             let at = format!("cloths[{i}]");
-            is.behaviour(&at, c.air, c.tethers, c.stretch_limit, c.tearing);
+            is.behaviour(&at, super::behaviour::Behaviour::of_cloth(c));
             is.point(format!("{at}.origin"), c.origin);
             is.speed(format!("{at}.velocity"), c.velocity);
             is.size(format!("{at}.size.0"), c.size.0);

@@ -44,6 +44,9 @@ pub enum StageKind {
     /// Stretch limits ([`crate::StretchLimit`]): springs longer than their limit put back,
     /// their ends' separating velocity removed.
     StretchLimit,
+    /// Self-collision ([`crate::SelfCollision`]): particles of colliding cloths closer than
+    /// their thickness pushed apart, their approach removed, with friction.
+    SelfCollision,
     /// Rigid bodies (the scene's own rapier world or the caller's sets): attached particles
     /// follow their bodies, then particles are pushed out of colliders with friction and the
     /// dynamic bodies get the opposite impulses.
@@ -58,7 +61,7 @@ pub enum StageKind {
 
 impl StageKind {
     /// Every kind, in the order a frame runs them.
-    pub const ALL: [StageKind; 10] = [
+    pub const ALL: [StageKind; 11] = [
         StageKind::Gravity,
         StageKind::Air,
         StageKind::Forces,
@@ -66,6 +69,7 @@ impl StageKind {
         StageKind::Drive,
         StageKind::Tethers,
         StageKind::StretchLimit,
+        StageKind::SelfCollision,
         StageKind::Contacts,
         StageKind::Quarantine,
         StageKind::Tearing,
@@ -84,6 +88,7 @@ impl StageKind {
             StageKind::Drive => "drive",
             StageKind::Tethers => "tethers",
             StageKind::StretchLimit => "stretch-limit",
+            StageKind::SelfCollision => "self-collision",
             StageKind::Contacts => "contacts",
             StageKind::Quarantine => "quarantine",
             StageKind::Tearing => "tearing",
@@ -99,6 +104,7 @@ impl StageKind {
             | StageKind::Drive
             | StageKind::Tethers
             | StageKind::StretchLimit
+            | StageKind::SelfCollision
             | StageKind::Contacts
             | StageKind::Quarantine => Cadence::Substep,
         }
@@ -112,6 +118,7 @@ impl StageKind {
             StageKind::Drive
             | StageKind::Tethers
             | StageKind::StretchLimit
+            | StageKind::SelfCollision
             | StageKind::Contacts
             | StageKind::Quarantine
             | StageKind::Tearing => Place::AfterIntegrate,
@@ -131,6 +138,7 @@ impl StageKind {
             StageKind::Tethers | StageKind::StretchLimit => {
                 "limits: the change of E its projections made"
             }
+            StageKind::SelfCollision => "contacts: the change of E its pushes and friction made",
             StageKind::Contacts => "attachments, contacts and friction: its projections",
             StageKind::Quarantine => "quarantine: the energy of the particles it froze",
             StageKind::Tearing => "torn: the energy the broken springs held",
@@ -187,6 +195,7 @@ impl Stage {
                 StageKind::Drive
                     | StageKind::Tethers
                     | StageKind::StretchLimit
+                    | StageKind::SelfCollision
                     | StageKind::Contacts
             )
     }
@@ -218,6 +227,8 @@ pub(crate) struct Needs {
     pub(crate) stretch: bool,
     /// Cloths tear.
     pub(crate) tearing: bool,
+    /// Cloths collide with themselves and each other.
+    pub(crate) collide: bool,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -255,6 +266,9 @@ impl Schedule {
         }
         if n.stretch {
             push(StageKind::StretchLimit, Backend::Cpu);
+        }
+        if n.collide {
+            push(StageKind::SelfCollision, Backend::Cpu);
         }
         if let Some(on) = n.contacts_on {
             push(StageKind::Contacts, on);

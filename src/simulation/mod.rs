@@ -107,6 +107,8 @@ pub struct Simulation {
     tethers: crate::tether::TetherStage,
     /// The cloths' stretch limits, in packed indices.
     stretch: crate::stretch::StretchStage,
+    /// The colliding cloths' particles and the frame's candidate pairs.
+    collide: crate::collide::CollideStage,
     /// The tearable cloths' springs, and the last frame's breaks.
     tear: crate::tear::TearStage,
     torn: Vec<crate::Tear>,
@@ -257,6 +259,7 @@ impl Simulation {
             air: Default::default(),
             tethers: Default::default(),
             stretch: Default::default(),
+            collide: Default::default(),
             tear: Default::default(),
             torn: Vec::new(),
             timers: true,
@@ -509,6 +512,7 @@ impl Simulation {
             air: !self.air.is_empty(),
             tethers: !self.tethers.is_empty(),
             stretch: !self.stretch.is_empty(),
+            collide: !self.collide.is_empty(),
             tearing: !self.tear.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,

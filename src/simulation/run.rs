@@ -25,6 +25,8 @@ pub(super) struct Run<'a> {
     pub(super) tethers: Option<&'a mut crate::tether::TetherStage>,
     /// The stretch limits, when their stage is listed.
     pub(super) stretch: Option<&'a mut crate::stretch::StretchStage>,
+    /// Self-collision, when its stage is listed.
+    pub(super) collide: Option<&'a mut crate::collide::CollideStage>,
     /// The tearing stage, when listed (it runs at the frame's end, in the frame's job).
     pub(super) tear: Option<&'a mut crate::tear::TearStage>,
     pub(super) gravity: DVec3,
@@ -162,6 +164,9 @@ impl Run<'_> {
         if let Some(s) = &self.stretch {
             self.auditor.book(Line::Limits, -s.energy);
         }
+        if let Some(c) = &self.collide {
+            self.auditor.book(Line::Contacts, -c.energy);
+        }
         if let Some(t) = &self.tear {
             self.auditor.book(Line::Torn, t.energy);
         }
@@ -180,6 +185,17 @@ impl Run<'_> {
         }
         if let (StageKind::StretchLimit, 0, Some(s)) = (stage.kind, k, self.stretch.as_mut()) {
             s.energy = 0.0;
+        }
+        if let (StageKind::SelfCollision, 0) = (stage.kind, k) {
+            // The candidates from the frame's start state (on the host at a frame's start).
+            if let Some(c) = self.collide.as_mut() {
+                c.begin_frame(
+                    self.packed,
+                    h * f64::from(self.frame_substeps),
+                    self.gravity,
+                );
+            }
+            self.charge(StageKind::SelfCollision);
         }
         if stage.kind == StageKind::Drive {
             if let Some(d) = self.drives.as_mut() {
@@ -266,6 +282,16 @@ impl Run<'_> {
                 }
                 self.host_moved();
                 self.charge(StageKind::StretchLimit);
+            }
+            (StageKind::SelfCollision, _) => {
+                self.state_to_host()?;
+                if let Some(c) = self.collide.as_mut() {
+                    if c.project(self.packed, self.gravity) {
+                        c.energy += self.auditor.spring_change(self.packed, c.moves());
+                    }
+                }
+                self.host_moved();
+                self.charge(StageKind::SelfCollision);
             }
             (StageKind::Contacts, Backend::Gpu) => self.device_contacts(k, n)?,
             (StageKind::Contacts, _) => {

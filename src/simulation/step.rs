@@ -145,6 +145,7 @@ impl Simulation {
             drives: (!self.drives.is_empty()).then_some(&mut self.drives),
             tethers: (!self.tethers.is_empty()).then_some(&mut self.tethers),
             stretch: (!self.stretch.is_empty()).then_some(&mut self.stretch),
+            collide: (!self.collide.is_empty()).then_some(&mut self.collide),
             tear: (!self.tear.is_empty()).then_some(&mut self.tear),
             gravity: self.config.gravity,
             frame_substeps: 0,
@@ -190,7 +191,8 @@ impl Simulation {
                 // The drive stage's moves are booked at the frame's end (`book_frame`).
                 let driven = run.drives.as_ref().map_or(0.0, |d| d.energy);
                 let tied = run.tethers.as_ref().map_or(0.0, |t| t.energy)
-                    + run.stretch.as_ref().map_or(0.0, |s| s.energy);
+                    + run.stretch.as_ref().map_or(0.0, |s| s.energy)
+                    + run.collide.as_ref().map_or(0.0, |c| c.energy);
                 let after = before + (e - f.start - f.edits - f.forces - driven - tied + f.damping);
                 let Some(more) = controller.rejects(*substeps_out, before, after, tol) else {
                     break e;
@@ -457,6 +459,7 @@ impl Simulation {
         self.drives.refresh(&self.packed);
         self.tethers.gather(&self.world, &self.packed);
         self.stretch.gather(&self.world, &self.packed);
+        self.collide.gather(&self.world, &self.packed);
         self.tear.gather(&self.world, &self.packed);
         self.solver.invalidate();
         self.parallel = crate::integrate::runs_parallel(&self.packed);

@@ -30,4 +30,10 @@ impl Simulation {
     pub fn torn(&self) -> &[crate::Tear] {
         &self.torn
     }
+
+    /// The last frame's self-collision candidates ([`crate::SelfCollision`]): the pairs of
+    /// particles its substeps tested (0 without a colliding cloth).
+    pub fn collision_pairs(&self) -> usize {
+        self.collide.pair_count()
+    }
 }

@@ -72,6 +72,7 @@ pub fn swinging_cloth(n: u32, stiffness: f64, throw: f64) -> Scene {
         tethers: None,
         stretch_limit: None,
         tearing: None,
+        self_collision: None,
     }];
     s
 }

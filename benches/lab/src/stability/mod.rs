@@ -173,6 +173,7 @@ pub fn cloth(n: u32, zeta: f64) -> Scene {
         tethers: None,
         stretch_limit: None,
         tearing: None,
+        self_collision: None,
     }];
     s
 }

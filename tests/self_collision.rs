@@ -1,0 +1,236 @@
+//! Self-collision and cloth–cloth collision (`self_collision:` per cloth), the particle layer:
+//! checked against the thickness two stacked cloths must rest apart at, the momentum two
+//! colliding cloths must keep, a cloth whose neighbours never come that close (unchanged bit
+//! for bit), thread counts, and the scene checks.
+
+use harmonic::prelude::*;
+use harmonic::StageKind;
+
+mod common;
+
+/// A horizontal `n`×`n` cloth of 0.5 m at height `y`, centred on the y axis, with `extra`
+/// (RON) added; every particle pinned where `pinned`.
+fn sheet(n: u32, y: f64, pinned: bool, extra: &str) -> String {
+    let pins: Vec<String> = (0..n)
+        .flat_map(|r| (0..n).map(move |c| format!("Particle({c}, {r})")))
+        .collect();
+    let pins = if pinned {
+        pins.join(", ")
+    } else {
+        String::new()
+    };
+    format!(
+        "(origin: (-0.25, {y}, -0.25), size: (0.5, 0.5), resolution: ({n}, {n}), mass: 0.1,
+          plane: Horizontal, structural: (frequency: 20.0, damping_ratio: 0.3),
+          shear: Some((frequency: 20.0, damping_ratio: 0.3)), pins: [{pins}] {extra})"
+    )
+}
+
+fn scene(cloths: &[String], gravity: f64) -> Scene {
+    Scene::parse(
+        &format!(
+            "Scene(dt: 0.016666666666666666, substeps: 8, integrator: \"symplectic-euler\",
+              gravity: (0.0, {gravity}, 0.0), cloths: [{}])",
+            cloths.join(", ")
+        ),
+        "collide.ron",
+    )
+    .unwrap()
+}
+
+const LAYER: &str = ", self_collision: Some((thickness: 0.03, friction: 0.5))";
+
+/// A 12×12 sheet (spacing 45 mm) dropped from 10 cm onto a pinned one of the same grid, both
+/// 30 mm thick: without collision it falls through; with it, every particle comes to rest on
+/// the one below at the thickness, within the sag one substep's gravity gives (`g h²`).
+#[test]
+fn a_sheet_rests_on_another_at_the_thickness() {
+    let run = |extra: &str| {
+        let cloths = [sheet(12, 0.0, true, extra), sheet(12, 0.1, false, extra)];
+        let mut sim = Simulation::from_scene(&scene(&cloths, -9.81)).unwrap();
+        for _ in 0..180 {
+            sim.step().unwrap();
+        }
+        let y: Vec<f64> = sim.positions()[144..].iter().map(|p| p.y).collect();
+        (sim, y)
+    };
+    let (free, y) = run("");
+    assert!(!free.schedule().has(StageKind::SelfCollision));
+    let lowest = y.iter().copied().fold(f64::MAX, f64::min);
+    assert!(
+        lowest < -0.5,
+        "without collision it falls through: {lowest}"
+    );
+    let (sim, y) = run(LAYER);
+    assert!(
+        sim.schedule().has(StageKind::SelfCollision),
+        "{}",
+        sim.schedule()
+    );
+    let h = 1.0 / 480.0;
+    let sag = 9.81 * h * h;
+    let (lo, hi) = (
+        y.iter().copied().fold(f64::MAX, f64::min),
+        y.iter().copied().fold(f64::MIN, f64::max),
+    );
+    let a = sim.diagnostics().audit;
+    println!(
+        "resting {lo:.6} .. {hi:.6} m over the lower sheet (thickness 0.03, g h² {sag:.1e}); \
+         {} pairs; contacts took {:.4e} J, residual {:.2e} J",
+        sim.collision_pairs(),
+        a.contacts,
+        a.residual
+    );
+    assert!(lo > 0.03 - 2.0 * sag && hi < 0.03 + 1e-4, "{lo} .. {hi}");
+    assert!(sim.collision_pairs() >= 144, "{}", sim.collision_pairs());
+    assert!(
+        a.contacts > 0.0,
+        "the landing takes energy out: {}",
+        a.contacts
+    );
+    assert!(sim.diagnostics().failure.is_none());
+}
+
+/// Two free 10×10 sheets (spacing 55.6 mm) thrown at each other without gravity, one offset
+/// by about half a cell, 45 mm thick: over the half diagonal (39.3 mm), so no particle fits
+/// through a cell of the other. They do not pass through (without collision they do), and the
+/// pushes and friction keep the total momentum (each pair's moves go by inverse mass).
+#[test]
+fn colliding_sheets_keep_their_momentum_and_their_order() {
+    let run = |extra: &str| {
+        let a = sheet(
+            10,
+            0.0,
+            false,
+            &format!("{extra}, velocity: (0.3, 1.0, 0.0)"),
+        );
+        let b = sheet(
+            10,
+            0.1,
+            false,
+            &format!("{extra}, velocity: (0.0, -1.0, 0.1)"),
+        );
+        let b = b.replace("origin: (-0.25, 0.1, -0.25)", "origin: (-0.22, 0.1, -0.22)");
+        let mut sim = Simulation::from_scene(&scene(&[a, b], 0.0)).unwrap();
+        let momentum = |sim: &Simulation| -> DVec3 {
+            sim.velocities().iter().map(|v| *v * (0.1 / 100.0)).sum()
+        };
+        let p0 = momentum(&sim);
+        for _ in 0..30 {
+            sim.step().unwrap();
+        }
+        let mean =
+            |r: std::ops::Range<usize>| sim.positions()[r].iter().map(|p| p.y).sum::<f64>() / 100.0;
+        let apart = mean(100..200) - mean(0..100);
+        (
+            apart,
+            (momentum(&sim) - p0).length(),
+            sim.diagnostics().audit,
+        )
+    };
+    let (through, _, _) = run("");
+    assert!(through < 0.0, "without collision they pass: {through}");
+    let (apart, drift, a) = run(", self_collision: Some((thickness: 0.045, friction: 0.5))");
+    println!(
+        "apart {apart:.4} m; momentum drift {drift:.2e} kg m/s; contacts {:.3e} J",
+        a.contacts
+    );
+    assert!(apart > 0.0, "the upper sheet stays above: {apart}");
+    assert!(drift < 1e-12, "momentum kept: {drift}");
+    assert!(a.contacts > 0.0);
+}
+
+/// A cloth whose particles never come within the thickness of each other steps as if it had
+/// no collision, bit for bit: the stage only acts on contact.
+#[test]
+fn a_layer_out_of_contact_changes_nothing() {
+    let hang = |extra: &str| {
+        let cloth = sheet(12, 0.0, false, extra).replace(
+            "plane: Horizontal,",
+            "plane: Vertical, pins: [TopLeft, TopRight],",
+        );
+        let cloth = cloth.replace(", pins: [] ", " ");
+        let mut sim = Simulation::from_scene(&scene(&[cloth], -9.81)).unwrap();
+        for _ in 0..60 {
+            sim.step().unwrap();
+        }
+        let on = sim.schedule().has(StageKind::SelfCollision);
+        (sim.positions().to_vec(), on)
+    };
+    let thin = ", self_collision: Some((thickness: 0.005))";
+    let (a, _) = hang("");
+    let (b, on) = hang(thin);
+    assert!(on);
+    assert!(a == b);
+}
+
+/// The stage runs in one fixed order: 1 and 2 threads give the same bits.
+#[test]
+fn self_collision_is_the_same_on_1_and_2_threads() {
+    let cloths = [sheet(12, 0.0, true, LAYER), sheet(12, 0.1, false, LAYER)];
+    let scene = scene(&cloths, -9.81);
+    let runs: Vec<(Vec<DVec3>, f64)> = [1, 2]
+        .map(|threads| {
+            common::on_threads(threads, || {
+                let mut sim = Simulation::from_scene(&scene).unwrap();
+                for _ in 0..40 {
+                    sim.step().unwrap();
+                }
+                (sim.positions().to_vec(), sim.diagnostics().audit.contacts)
+            })
+        })
+        .into();
+    assert!(runs[0].1 > 0.0);
+    assert!(runs[0] == runs[1]);
+}
+
+/// A thickness at or over the particle spacing, or a bad coefficient, is refused where it is.
+#[test]
+fn bad_self_collision_is_refused_by_name() {
+    for (layer, want) in [
+        ("(thickness: 0.05)", "particle spacing"),
+        ("(thickness: 0.0)", "thickness must be finite and > 0"),
+        ("(thickness: 0.01, friction: -1.0)", "friction must be"),
+        (
+            "(thickness: 0.01, kinetic_friction: inf)",
+            "kinetic_friction must be",
+        ),
+        (
+            "(thickness: 0.01, friction: 0.2, kinetic_friction: 0.3)",
+            "must be at most friction",
+        ),
+    ] {
+        let cloth = sheet(12, 0.0, false, &format!(", self_collision: Some({layer})"));
+        let text = format!("Scene(dt: 0.016666666666666666, substeps: 8, cloths: [{cloth}])");
+        let msg = Scene::parse(&text, "bad.ron").unwrap_err().to_string();
+        assert!(
+            msg.contains("cloths[0].self_collision") && msg.contains(want),
+            "{layer}: {msg}"
+        );
+    }
+}
+
+/// With the springs on the GPU the stage runs on the host between the device's substeps: the
+/// sheet rests on the other at the thickness there too (to the device's f32).
+#[test]
+fn a_sheet_rests_at_the_thickness_beside_the_gpu_springs() {
+    if common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)).is_none() {
+        return;
+    }
+    let cloths = [sheet(12, 0.0, true, LAYER), sheet(12, 0.1, false, LAYER)];
+    let mut s = scene(&cloths, -9.81);
+    s.backend = Some("gpu".into());
+    let mut sim = Simulation::from_scene(&s).unwrap();
+    assert!(
+        sim.schedule().has(StageKind::SelfCollision),
+        "{}",
+        sim.schedule()
+    );
+    for _ in 0..180 {
+        sim.step().unwrap();
+    }
+    let y = sim.positions()[144..].iter().map(|p| p.y);
+    let (lo, hi) = y.fold((f64::MAX, f64::MIN), |(lo, hi), y| (lo.min(y), hi.max(y)));
+    println!("gpu: resting {lo:.6} .. {hi:.6} m");
+    assert!(lo > 0.0299 && hi < 0.0301, "{lo} .. {hi}");
+}
