@@ -10,14 +10,13 @@
 //! mean of their thicknesses (each layer's surfaces half a thickness either side of its
 //! particles) and slide at the mean of their coefficients (rapier's default rule).
 //!
-//! Candidates come once a frame from a uniform grid of cells a reach wide: the largest
-//! thickness plus twice the furthest any particle can move in the frame at its start velocity
-//! under gravity. Cells are sorted by key (`std`'s sort, no hashing order), so the candidates
-//! and the Gauss–Seidel passes over them each substep run in one fixed order: the same on any
-//! number of threads. What the pushes and friction do to `E` is booked on
+//! The candidates are the pairs within their thickness plus a margin (the thinnest layer's
+//! thickness), a Verlet list: found at a frame's start and again whenever a member has moved
+//! more than half the margin since, less the members' mean move (a pair's distance changes by
+//! at most the two moves less any common one, so no pair outside the list can have closed to
+//! its thickness). They are found from members sorted by cell, so they and the Gauss–Seidel
+//! pass over them each substep run in one fixed order: the same on any number of threads. What the pushes and friction do to `E` is booked on
 //! [`crate::EnergyAudit::contacts`].
-
-use std::collections::HashMap;
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -25,6 +24,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::buffers::Packed;
 use crate::components::{Particle, SceneIndex};
+
+/// The furthest cell from the origin a key tells apart, on each axis.
+const SPAN: f64 = ((1 << 20) - 2) as f64;
 
 /// A cloth's self-collision, as a scene gives it (`self_collision: Some((thickness: 0.005,
 /// friction: 0.5))`).
@@ -127,11 +129,16 @@ pub(crate) struct CollideStage {
     /// Each colliding particle's packed index (ascending), layer and rest position.
     members: Vec<(u32, u16, DVec3)>,
     layers: Vec<SelfCollision>,
-    /// The frame's candidates `(a, b, thickness, kinetic, static)`, packed indices, `a < b`.
+    /// The candidates `(a, b, thickness, kinetic, static)`, packed indices, `a < b`.
     pairs: Vec<(u32, u32, f64, f64, f64)>,
-    /// Cell keys of the members, sorted, and each cell's run of them.
-    cells: Vec<((i64, i64, i64), u32)>,
-    runs: HashMap<(i64, i64, i64), (u32, u32)>,
+    /// Cell keys of the members, sorted.
+    cells: Vec<(u64, u32)>,
+    /// The members' positions when the candidates were found, and the margin past the
+    /// thickness they were found within (m): the thinnest layer's thickness.
+    built: Vec<DVec3>,
+    margin: f64,
+    /// Times the candidates were found (for the stage's report).
+    rebuilds: u64,
     moves: crate::audit::Moves,
     before_v: Vec<DVec3>,
     /// The change of `E` the pushes and friction made this frame (J).
@@ -163,6 +170,9 @@ impl CollideStage {
         } else {
             n as usize
         };
+        self.margin = (self.layers.iter())
+            .map(|l| l.thickness)
+            .fold(f64::MAX, f64::min);
         self.moves.reset(n);
         self.before_v.resize(n, DVec3::ZERO);
         self.pairs.clear();
@@ -172,22 +182,46 @@ impl CollideStage {
         self.members.is_empty()
     }
 
-    /// The candidate pairs for a frame of `dt` from the state at its start: every pair of
-    /// members within their thickness plus twice the furthest a particle moves in the frame,
-    /// less neighbours along one cloth; in order.
-    pub(crate) fn begin_frame(&mut self, packed: &Packed, dt: f64, gravity: DVec3) {
+    /// A frame's start: its books opened, and the candidates found again from its state (the
+    /// game may have moved particles since the last frame).
+    pub(crate) fn begin_frame(&mut self, packed: &Packed) {
         self.energy = 0.0;
-        self.pairs.clear();
-        let (x, v) = (&packed.x, &packed.v);
-        let travel = (self.members.iter())
-            .map(|m| v[m.0 as usize].length() * dt + 0.5 * gravity.length() * dt * dt)
-            .filter(|d| d.is_finite())
+        self.rebuild(packed);
+    }
+
+    /// The candidates found again if some pair may have closed past the margin since they
+    /// were: a member's move since then, less the members' mean move, over half the margin.
+    fn refresh(&mut self, packed: &Packed) {
+        let x = &packed.x;
+        let moves = || (self.members.iter().zip(&self.built)).map(|(m, b)| x[m.0 as usize] - *b);
+        let mean = moves().sum::<DVec3>() / self.members.len().max(1) as f64;
+        let far = moves()
+            .map(|d| (d - mean).length_squared())
             .fold(0.0, f64::max);
+        let half = 0.5 * self.margin;
+        if far > half * half {
+            self.rebuild(packed);
+        }
+    }
+
+    /// Every pair of members within their thickness plus the margin, less neighbours along one
+    /// cloth, in order: members sorted by cell (cells the largest thickness plus the margin
+    /// wide), each cell's neighbours found by binary search, three cells of a column at once.
+    fn rebuild(&mut self, packed: &Packed) {
+        self.rebuilds += 1;
+        self.pairs.clear();
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        self.built.clear();
+        self.built
+            .extend(self.members.iter().map(|m| x[m.0 as usize]));
         let thickest = self.layers.iter().map(|l| l.thickness).fold(0.0, f64::max);
-        let cell = thickest + 2.0 * travel;
+        let cell = thickest + self.margin;
         let key = |p: DVec3| {
             let c = (p / cell).floor();
-            (c.x as i64, c.y as i64, c.z as i64)
+            // Each coordinate in its 21 bits (far cells share the edge ones: the distance
+            // decides), so the keys sort as the cells do, a column's cells in a row.
+            let f = |v: f64| (v.clamp(-SPAN, SPAN) as i64 + (1 << 20)) as u64;
+            (f(c.x) << 42) | (f(c.y) << 21) | f(c.z)
         };
         self.cells.clear();
         self.cells.extend(
@@ -197,57 +231,70 @@ impl CollideStage {
                 .map(|(s, m)| (key(x[m.0 as usize]), s)),
         );
         self.cells.sort_unstable();
-        self.runs.clear();
+        let cells = &self.cells;
+        // The nine columns beside a cell, as key offsets; each column's run of three cells
+        // found by cursors that only move on, as the cells come in key order.
+        let columns: Vec<i64> = (-1i64..=1)
+            .flat_map(|dx| (-1i64..=1).map(move |dy| (dx << 42) + (dy << 21)))
+            .collect();
+        let (mut starts, mut ends) = ([0usize; 9], [0usize; 9]);
         let mut lo = 0;
-        for hi in 1..=self.cells.len() {
-            if hi == self.cells.len() || self.cells[hi].0 != self.cells[lo].0 {
-                self.runs.insert(self.cells[lo].0, (lo as u32, hi as u32));
-                lo = hi;
-            }
-        }
-        let inv = &packed.inv_mass;
-        for &(c, s) in &self.cells {
-            let (a, la, ra) = self.members[s as usize];
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        let Some(&(lo, hi)) = self.runs.get(&(c.0 + dx, c.1 + dy, c.2 + dz)) else {
+        while lo < cells.len() {
+            let c = cells[lo].0;
+            let hi = lo + cells[lo..].partition_point(|e| e.0 == c);
+            for (j, &column) in columns.iter().enumerate() {
+                let (from, to) = (
+                    (c as i64 + column - 1) as u64,
+                    (c as i64 + column + 1) as u64,
+                );
+                while starts[j] < cells.len() && cells[starts[j]].0 < from {
+                    starts[j] += 1;
+                }
+                ends[j] = ends[j].max(starts[j]);
+                while ends[j] < cells.len() && cells[ends[j]].0 <= to {
+                    ends[j] += 1;
+                }
+                let (first, last) = (starts[j], ends[j]);
+                for &(_, s) in &cells[lo..hi] {
+                    let (a, la, ra) = self.members[s as usize];
+                    for &(_, u) in &cells[first..last] {
+                        let (b, lb, rb) = self.members[u as usize];
+                        if b <= a {
                             continue;
-                        };
-                        for &(_, u) in &self.cells[lo as usize..hi as usize] {
-                            let (b, lb, rb) = self.members[u as usize];
-                            if b <= a || inv[a as usize] + inv[b as usize] == 0.0 {
-                                continue;
-                            }
-                            let (pa, pb) = (self.layers[la as usize], self.layers[lb as usize]);
-                            let t = 0.5 * (pa.thickness + pb.thickness);
-                            if la == lb && (rb - ra).length() < 2.0 * pa.thickness {
-                                continue;
-                            }
-                            let reach = t + 2.0 * travel;
-                            if (x[b as usize] - x[a as usize]).length_squared() >= reach * reach {
-                                continue;
-                            }
-                            let mu = 0.5 * (pa.kinetic_friction + pb.kinetic_friction);
-                            let mu_s = 0.5 * (pa.friction + pb.friction);
-                            self.pairs.push((a, b, t, mu, mu_s));
                         }
+                        let (pa, pb) = (self.layers[la as usize], self.layers[lb as usize]);
+                        let t = 0.5 * (pa.thickness + pb.thickness);
+                        let reach = t + self.margin;
+                        if (x[b as usize] - x[a as usize]).length_squared() >= reach * reach
+                            || inv[a as usize] + inv[b as usize] == 0.0
+                        {
+                            continue;
+                        }
+                        let near = 2.0 * pa.thickness;
+                        if la == lb && (rb - ra).length_squared() < near * near {
+                            continue;
+                        }
+                        let mu = 0.5 * (pa.kinetic_friction + pb.kinetic_friction);
+                        let mu_s = 0.5 * (pa.friction + pb.friction);
+                        self.pairs.push((a, b, t, mu, mu_s));
                     }
                 }
             }
+            lo = hi;
         }
         self.pairs.sort_unstable_by_key(|p| (p.0, p.1));
     }
 
-    /// Candidate pairs this frame.
-    pub(crate) fn pair_count(&self) -> usize {
-        self.pairs.len()
+    /// The candidate pairs, and the times they were found since the stage was gathered.
+    pub(crate) fn pair_count(&self) -> (usize, u64) {
+        (self.pairs.len(), self.rebuilds)
     }
 
     /// After a substep's springs: one pass over the candidates in order; the change of the
     /// particles' own energy booked. Returns whether any moved: the springs' change, from
     /// [`Self::moves`], is then the caller's to add.
     pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
+        self.refresh(packed);
         let n = self.moves.moved.len();
         self.moves.reset(n);
         let mut any = false;

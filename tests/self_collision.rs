@@ -77,12 +77,17 @@ fn a_sheet_rests_on_another_at_the_thickness() {
     println!(
         "resting {lo:.6} .. {hi:.6} m over the lower sheet (thickness 0.03, g h² {sag:.1e}); \
          {} pairs; contacts took {:.4e} J, residual {:.2e} J",
-        sim.collision_pairs(),
+        sim.collision_pairs().0,
         a.contacts,
         a.residual
     );
     assert!(lo > 0.03 - 2.0 * sag && hi < 0.03 + 1e-4, "{lo} .. {hi}");
-    assert!(sim.collision_pairs() >= 144, "{}", sim.collision_pairs());
+    let (pairs, found) = sim.collision_pairs();
+    assert!(pairs >= 144, "{pairs}");
+    assert!(
+        (180..=180 * 8).contains(&found),
+        "found once a frame and on moves: {found}"
+    );
     assert!(
         a.contacts > 0.0,
         "the landing takes energy out: {}",

@@ -189,11 +189,7 @@ impl Run<'_> {
         if let (StageKind::SelfCollision, 0) = (stage.kind, k) {
             // The candidates from the frame's start state (on the host at a frame's start).
             if let Some(c) = self.collide.as_mut() {
-                c.begin_frame(
-                    self.packed,
-                    h * f64::from(self.frame_substeps),
-                    self.gravity,
-                );
+                c.begin_frame(self.packed);
             }
             self.charge(StageKind::SelfCollision);
         }

@@ -31,9 +31,11 @@ impl Simulation {
         &self.torn
     }
 
-    /// The last frame's self-collision candidates ([`crate::SelfCollision`]): the pairs of
-    /// particles its substeps tested (0 without a colliding cloth).
-    pub fn collision_pairs(&self) -> usize {
+    /// Self-collision's candidates ([`crate::SelfCollision`]): the pairs of particles the
+    /// last substep tested, and the times the candidates were found since the scene was last
+    /// gathered (once a frame, and again where the particles moved past their margin; 0
+    /// without a colliding cloth).
+    pub fn collision_pairs(&self) -> (usize, u64) {
         self.collide.pair_count()
     }
 }

@@ -484,6 +484,12 @@ fn run(args: RunArgs) -> Result<(), String> {
         (m as f64 * substeps as f64) / wall / 1e6
     );
     say!("{}", times.shares());
+    if sim.schedule().has(StageKind::SelfCollision) {
+        let (pairs, found) = sim.collision_pairs();
+        say!(
+            "self-collision: {pairs} candidate pairs at the end; candidates found {found} times in {done} frame(s)"
+        );
+    }
     if sim.props().is_some() {
         say!(
             "contacts: {contacts} particle-collider contacts ({swept} by the swept test), deepest {max_depth:.3e} m inside"
