@@ -34,6 +34,26 @@ impl Moves {
         self.moved.resize(n, false);
     }
 
+    /// Adds `E(x, v) − E(before, before_v)` of each moved particle to `sum`, in order: the
+    /// change of their own energy (kinetic and gravity's); one gone non-finite is the
+    /// quarantine's.
+    pub(crate) fn book_particles(
+        &self,
+        before_v: &[DVec3],
+        packed: &Packed,
+        gravity: DVec3,
+        sum: &mut f64,
+    ) {
+        let (inv, x, v) = (&packed.inv_mass, &packed.x, &packed.v);
+        let at = |i: usize, x: DVec3, v: DVec3| particle_energy_at(inv[i], x, v, gravity);
+        for i in (0..self.moved.len()).filter(|&i| self.moved[i]) {
+            let change = at(i, x[i], v[i]) - at(i, self.before[i], before_v[i]);
+            if change.is_finite() {
+                *sum += change;
+            }
+        }
+    }
+
     /// Keeps where particle `i` was, at its first move.
     #[inline]
     pub(crate) fn mark(moved: &mut bool, before: &mut DVec3, x: DVec3) {

@@ -344,16 +344,7 @@ impl CollideStage {
             }
         }
         if any {
-            let at = |i: usize, x: DVec3, v: DVec3| {
-                crate::audit::particle_energy_at(inv[i], x, v, gravity)
-            };
-            let (moved, before) = (&self.moves.moved, &self.moves.before);
-            for i in (0..moved.len()).filter(|&i| moved[i]) {
-                let change = at(i, x[i], v[i]) - at(i, before[i], self.before_v[i]);
-                if change.is_finite() {
-                    self.energy += change;
-                }
-            }
+            (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
         }
         any
     }
