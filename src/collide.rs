@@ -122,8 +122,8 @@ pub fn layer(world: &World, first: u32, count: u32, spec: SelfCollision) -> Laye
     }
 }
 
-/// The colliding particles in packed indices, this frame's candidate pairs, and what their
-/// pushes did this frame.
+/// The colliding particles in packed indices, the candidate pairs, and what their pushes did
+/// this frame.
 #[derive(Debug, Default)]
 pub(crate) struct CollideStage {
     /// Each colliding particle's packed index (ascending), layer and rest position.
@@ -176,6 +176,7 @@ impl CollideStage {
         self.moves.reset(n);
         self.before_v.resize(n, DVec3::ZERO);
         self.pairs.clear();
+        self.rebuilds = 0;
     }
 
     pub(crate) fn is_empty(&self) -> bool {
@@ -193,8 +194,13 @@ impl CollideStage {
     /// were: a member's move since then, less the members' mean move, over half the margin.
     fn refresh(&mut self, packed: &Packed) {
         let x = &packed.x;
-        let moves = || (self.members.iter().zip(&self.built)).map(|(m, b)| x[m.0 as usize] - *b);
-        let mean = moves().sum::<DVec3>() / self.members.len().max(1) as f64;
+        // A particle gone non-finite is the quarantine's: the others' moves decide.
+        let moves = || {
+            (self.members.iter().zip(&self.built))
+                .map(|(m, b)| x[m.0 as usize] - *b)
+                .filter(|d| d.is_finite())
+        };
+        let mean = moves().sum::<DVec3>() / moves().count().max(1) as f64;
         let far = moves()
             .map(|d| (d - mean).length_squared())
             .fold(0.0, f64::max);
