@@ -3,6 +3,8 @@
 
 use harmonic::prelude::*;
 
+pub mod crossing;
+
 /// Two particles on the x axis joined by one spring (κ, ζ) with masses `ma`, `mb`, no gravity,
 /// stretched by `d0` and stretching at `v0`; stepped at `h = ratio · h_c`.
 #[allow(clippy::too_many_arguments)]

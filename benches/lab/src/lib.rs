@@ -16,6 +16,7 @@
 
 pub mod accuracy;
 pub mod baseline;
+pub mod crossings;
 pub mod frame_time;
 pub mod game_cost;
 #[cfg(feature = "gpu")]

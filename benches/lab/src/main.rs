@@ -134,6 +134,14 @@ enum Command {
         #[arg(long, default_value_t = 60)]
         frames: u32,
     },
+    /// Cloth through cloth: a scene run with and without its self-collision, the triangle
+    /// pairs crossing at each frame's end counted (exact test), beside the stage's cost.
+    Crossings {
+        scene: PathBuf,
+        /// Frames to run (default: the scene's seconds).
+        #[arg(long)]
+        frames: Option<u32>,
+    },
 }
 
 /// The longest hard case `stability --seconds` runs (an hour simulated: hours of wall time).
@@ -218,6 +226,12 @@ fn main() -> ExitCode {
             }),
         Command::DrapePeer { scene } => drape_peer(&scene),
         Command::GameCost { frames: 0 } => Err("--frames 0: run at least one frame".into()),
+        Command::Crossings {
+            frames: Some(0), ..
+        } => Err("--frames 0: run at least one frame".into()),
+        Command::Crossings { scene, frames } => {
+            harmonic_lab::crossings::report(&scene, frames).map(|r| print!("{r}"))
+        }
         Command::GameCost { frames } => {
             harmonic_lab::game_cost::report(frames).map(|r| print!("{r}"))
         }

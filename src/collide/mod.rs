@@ -1,0 +1,548 @@
+//! Self-collision and cloth–cloth collision: a particle of a cloth that collides
+//! (`self_collision:`) closer than the thickness to a triangle of one (its own or another's)
+//! is pushed out from the triangle's closest point to that thickness, the particle and the
+//! triangle's corners moved by inverse mass (weighted by the point's barycentric weights, so
+//! the momentum is kept), their approach along the normal removed, and their sliding across it
+//! slowed by Coulomb friction (stopped where the normal impulse times the static coefficient
+//! can stop it, else slowed by it times the kinetic one), as the colliders' contacts do. The
+//! test is swept: a particle that crossed a triangle's plane inside it over the substep goes
+//! back to the side it started on, however far it moved. Cloths without triangles (a single
+//! row) meet each other particle against particle.
+//!
+//! Pairs of one cloth closer at rest than twice its thickness never collide: they are
+//! neighbours along the cloth, which its springs hold apart. Two cloths collide at the mean of
+//! their thicknesses (each layer's surfaces half a thickness either side of its particles) and
+//! slide at the mean of their coefficients (rapier's default rule).
+//!
+//! The candidates are those within their thickness plus a margin (the thinnest layer's
+//! thickness), a Verlet list: found at a frame's start and again whenever a member has moved
+//! more than half the margin since, less the members' mean move. They are found from members
+//! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
+//! substep run in one fixed order: the same on any number of threads. What the pushes and
+//! friction do to `E` is booked on [`crate::EnergyAudit::contacts`].
+
+use glam::DVec3;
+use hecs::{Entity, World};
+use serde::{Deserialize, Serialize};
+
+use crate::buffers::Packed;
+use crate::components::{Particle, SceneIndex};
+
+mod contact;
+mod search;
+
+/// Passes over the pushed contacts' velocities each substep (the first with the pushes).
+const VELOCITY_PASSES: usize = 4;
+
+/// A cloth's self-collision, as a scene gives it (`self_collision: Some((thickness: 0.005,
+/// friction: 0.5))`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SelfCollision {
+    /// How close two of its particles may come (m): under its particle spacing.
+    pub thickness: f64,
+    /// Static Coulomb friction between its layers (and with other cloths'): a sliding the
+    /// normal impulse times this can stop, stops.
+    #[serde(default = "default_friction")]
+    pub friction: f64,
+    /// Kinetic friction, at most `friction`: what slows a sliding it cannot stop.
+    #[serde(default = "default_kinetic")]
+    pub kinetic_friction: f64,
+}
+
+// The colliders' contact defaults (`ContactParams`).
+fn default_friction() -> f64 {
+    0.5
+}
+
+fn default_kinetic() -> f64 {
+    0.4
+}
+
+impl SelfCollision {
+    /// What a self-collision must be: a thickness finite and > 0, coefficients finite and ≥ 0.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.thickness.is_finite() && self.thickness > 0.0) {
+            return Err(format!(
+                "thickness must be finite and > 0 m, got {:?}",
+                self.thickness
+            ));
+        }
+        for (name, mu) in [
+            ("friction", self.friction),
+            ("kinetic_friction", self.kinetic_friction),
+        ] {
+            if !(mu.is_finite() && mu >= 0.0) {
+                return Err(format!("{name} must be finite and ≥ 0, got {mu:?}"));
+            }
+        }
+        if self.kinetic_friction > self.friction {
+            return Err(format!(
+                "kinetic_friction {} must be at most friction {}",
+                self.kinetic_friction, self.friction
+            ));
+        }
+        Ok(())
+    }
+
+    /// The thickness against the cloth's particle `spacing` (its shortest spring at rest, m):
+    /// it must be under it, or neighbours along the cloth would push each other apart.
+    pub fn check_spacing(&self, spacing: f64) -> Result<(), String> {
+        if self.thickness >= spacing {
+            return Err(format!(
+                "thickness {} m must be under the cloth's particle spacing, {spacing} m (its \
+                 shortest spring at rest)",
+                self.thickness
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// A colliding cloth's layer (a component on its cloth entity): its self-collision and its
+/// particles' rest positions (scene indices `first ..`), which say which pairs are neighbours.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    /// What the scene asked for.
+    pub spec: SelfCollision,
+    /// The cloth's first particle (scene index).
+    pub first: u32,
+    /// Its particles' rest positions, from `first` on.
+    pub rest: Vec<DVec3>,
+}
+
+/// The layer of the cloth whose particles are scene indices `first .. first + count` in
+/// `world`, at their places now (the rest shape).
+pub fn layer(world: &World, first: u32, count: u32, spec: SelfCollision) -> Layer {
+    let mut parts: Vec<(u32, DVec3)> = world
+        .query::<(Entity, &SceneIndex, &Particle)>()
+        .iter()
+        .filter(|(_, i, _)| (first..first + count).contains(&i.0))
+        .map(|(_, i, p)| (i.0 - first, p.position))
+        .collect();
+    parts.sort_unstable_by_key(|p| p.0);
+    Layer {
+        spec,
+        first,
+        rest: parts.into_iter().map(|p| p.1).collect(),
+    }
+}
+
+/// A cloth's triangles, scene indices.
+type Triangles = Vec<[u32; 3]>;
+
+/// A colliding cloth's triangle: its corners' packed indices and member slots, and its layer.
+#[derive(Clone, Copy, Debug)]
+struct Triangle {
+    at: [u32; 3],
+    slots: [u32; 3],
+    layer: u16,
+}
+
+/// A candidate of a particle against a triangle: its packed index, the triangle's index, and
+/// the pair's thickness and friction.
+#[derive(Clone, Copy, Debug)]
+struct Face {
+    p: u32,
+    triangle: u32,
+    thickness: f64,
+    friction: contact::Friction,
+}
+
+/// The colliding particles and triangles in packed indices, the candidates, and what their
+/// pushes did this frame.
+#[derive(Debug, Default)]
+pub(crate) struct CollideStage {
+    /// Each colliding particle's packed index (ascending), layer and rest position.
+    members: Vec<(u32, u16, DVec3)>,
+    layers: Vec<SelfCollision>,
+    /// Whether each layer has triangles: its particles then meet every layer through them.
+    surfaced: Vec<bool>,
+    triangles: Vec<Triangle>,
+    /// Particle against particle, where neither has triangles: `(a, b, thickness,
+    /// friction)`, packed indices, `a < b`.
+    pairs: Vec<(u32, u32, f64, contact::Friction)>,
+    /// Particle against triangle, in the particles' cells' order, each particle's triangles
+    /// in their cells' order.
+    faces: Vec<Face>,
+    /// Cell keys of the members (then of the triangles' centres), sorted.
+    cells: Vec<(u64, u32)>,
+    triangle_cells: Vec<(u64, u32)>,
+    /// Each triangle's centre and the radius about it that holds its corners.
+    centres: Vec<(DVec3, f64)>,
+    /// The members' positions when the candidates were found, and at the substep's start
+    /// (packed indices; members only).
+    built: Vec<DVec3>,
+    start: Vec<DVec3>,
+    /// The thinnest layer's thickness: how far past its thickness a pair's candidate reaches.
+    margin: f64,
+    /// The reach the candidates were found with past the thickness: the margin, plus twice
+    /// the largest of `swept`.
+    reach: f64,
+    /// Each member's move over the substep the candidates were found in, less the mean: a
+    /// pair that crossed within it is as far apart as the two moves at most.
+    swept: Vec<f64>,
+    /// Times the candidates were found (for the stage's report).
+    rebuilds: u64,
+    moves: crate::audit::Moves,
+    before_v: Vec<DVec3>,
+    active: Vec<contact::Active>,
+    /// The change of `E` the pushes and friction made this frame (J).
+    pub(crate) energy: f64,
+}
+
+impl CollideStage {
+    /// Every colliding cloth's particles and triangles from `world`, in packed indices.
+    pub(crate) fn gather(&mut self, world: &World, packed: &Packed) {
+        self.members.clear();
+        self.layers.clear();
+        self.surfaced.clear();
+        self.triangles.clear();
+        let mut layers: Vec<(u32, SelfCollision, Vec<DVec3>, Triangles)> = world
+            .query::<(Entity, &Layer)>()
+            .iter()
+            .map(|(e, l)| {
+                let mut tris = Vec::new();
+                if let Ok(c) = world.get::<&crate::ClothSprings>(e) {
+                    c.grid.triangles(&mut tris);
+                }
+                crate::MeshSurface::all_of(world, e, &mut tris);
+                (l.first, l.spec, l.rest.clone(), tris)
+            })
+            .collect();
+        layers.sort_unstable_by_key(|l| l.0);
+        let n = packed.particle_count() as u32;
+        let mut tris = Vec::new();
+        for (k, (first, spec, rest, t)) in layers.into_iter().enumerate() {
+            self.layers.push(spec);
+            self.surfaced.push(!t.is_empty());
+            let at = (0u32..).zip(rest).filter(|(i, _)| first + i < n);
+            self.members
+                .extend(at.map(|(i, x)| (first + i, k as u16, x)));
+            tris.extend(t.into_iter().map(|t| (t, k as u16)));
+        }
+        self.members.sort_by_key(|m| m.0);
+        self.members.dedup_by_key(|m| m.0);
+        let slot = |i: u32| {
+            let s = self.members.partition_point(|m| m.0 < i);
+            (self.members.get(s)?.0 == i).then_some(s as u32)
+        };
+        for (at, layer) in tris {
+            if let [Some(a), Some(b), Some(c)] = at.map(slot) {
+                let slots = [a, b, c];
+                (self.triangles).push(Triangle { at, slots, layer });
+            }
+        }
+        let n = if self.members.is_empty() {
+            0
+        } else {
+            n as usize
+        };
+        self.margin = (self.layers.iter())
+            .map(|l| l.thickness)
+            .fold(f64::MAX, f64::min);
+        self.moves.reset(n);
+        self.before_v.resize(n, DVec3::ZERO);
+        self.start.resize(n, DVec3::ZERO);
+        self.pairs.clear();
+        self.faces.clear();
+        self.rebuilds = 0;
+    }
+
+    pub(crate) fn is_empty(&self) -> bool {
+        self.members.is_empty()
+    }
+
+    /// A frame's start: its books opened, and the candidates found again from its state (the
+    /// game may have moved particles since the last frame), which is the first substep's
+    /// start.
+    pub(crate) fn begin_frame(&mut self, packed: &Packed) {
+        self.energy = 0.0;
+        self.keep_start(packed);
+        self.swept.clear();
+        self.swept.resize(self.members.len(), 0.0);
+        self.rebuild(packed);
+    }
+
+    fn keep_start(&mut self, packed: &Packed) {
+        for m in &self.members {
+            self.start[m.0 as usize] = packed.x[m.0 as usize];
+        }
+    }
+
+    /// The candidates found again if some pair may have closed past the margin since they
+    /// were: a member's move since then, less the members' mean move, over half the margin
+    /// (a pair's distance, and a particle's from a triangle, changes by at most the two moves
+    /// less any common one, so none outside can have closed to its thickness, nor crossed on
+    /// the way: the moves are linear over the substep).
+    fn refresh(&mut self, packed: &Packed) {
+        let x = &packed.x;
+        // A particle gone non-finite is the quarantine's: the others' moves decide.
+        let largest = |from: &dyn Fn(u32, usize) -> DVec3| {
+            let moves = || {
+                (self.members.iter().enumerate())
+                    .map(|(s, m)| x[m.0 as usize] - from(m.0, s))
+                    .filter(|d| d.is_finite())
+            };
+            let mean = moves().sum::<DVec3>() / moves().count().max(1) as f64;
+            moves()
+                .map(|d| (d - mean).length_squared())
+                .fold(0.0, f64::max)
+                .sqrt()
+        };
+        let far = largest(&|_, s| self.built[s]);
+        if far > 0.5 * self.margin {
+            let moves =
+                || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
+            let finite = || moves().filter(|d| d.is_finite());
+            let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
+            self.swept.clear();
+            (self.swept).extend(moves().map(|d| {
+                let s = (d - mean).length();
+                if s.is_finite() {
+                    s
+                } else {
+                    0.0
+                }
+            }));
+            self.rebuild(packed);
+        }
+    }
+
+    /// The candidates within their thickness plus the margin (and the two ends' `swept`, so
+    /// that a pair that crossed within the substep is found from where it ended), less
+    /// neighbours along one cloth, in order.
+    fn rebuild(&mut self, packed: &Packed) {
+        self.rebuilds += 1;
+        let sweep = self.swept.iter().copied().fold(0.0, f64::max);
+        self.reach = self.margin + 2.0 * sweep;
+        let x = &packed.x;
+        self.built.clear();
+        self.built
+            .extend(self.members.iter().map(|m| x[m.0 as usize]));
+        self.find_pairs(packed);
+        self.find_faces(packed);
+    }
+
+    fn thickest(&self) -> f64 {
+        self.layers.iter().map(|l| l.thickness).fold(0.0, f64::max)
+    }
+
+    /// The pair's thickness and friction: the means of the two layers'.
+    fn combine(&self, la: u16, lb: u16) -> (f64, contact::Friction) {
+        let (pa, pb) = (self.layers[la as usize], self.layers[lb as usize]);
+        let t = 0.5 * (pa.thickness + pb.thickness);
+        let mu = 0.5 * (pa.kinetic_friction + pb.kinetic_friction);
+        let mu_s = 0.5 * (pa.friction + pb.friction);
+        (t, (mu, mu_s))
+    }
+
+    /// Particle against particle between layers without triangles.
+    fn find_pairs(&mut self, packed: &Packed) {
+        self.pairs.clear();
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        let cell = self.thickest() + self.reach;
+        self.cells.clear();
+        self.cells.extend(
+            (0u32..)
+                .zip(&self.members)
+                .filter(|(_, m)| !self.surfaced[m.1 as usize] && x[m.0 as usize].is_finite())
+                .map(|(s, m)| (search::key(x[m.0 as usize], cell), s)),
+        );
+        if self.cells.is_empty() {
+            return;
+        }
+        self.cells.sort_unstable();
+        let mut pairs = std::mem::take(&mut self.pairs);
+        search::beside(&self.cells, &self.cells, |run, near| {
+            for &(_, s) in run {
+                let (a, la, ra) = self.members[s as usize];
+                for &(_, u) in near.iter().copied().flatten() {
+                    let (b, lb, rb) = self.members[u as usize];
+                    if b <= a {
+                        continue;
+                    }
+                    let (t, friction) = self.combine(la, lb);
+                    let reach = t + self.margin + self.swept[s as usize] + self.swept[u as usize];
+                    if (x[b as usize] - x[a as usize]).length_squared() >= reach * reach
+                        || inv[a as usize] + inv[b as usize] == 0.0
+                    {
+                        continue;
+                    }
+                    let near = 2.0 * self.layers[la as usize].thickness;
+                    if la == lb && (rb - ra).length_squared() < near * near {
+                        continue;
+                    }
+                    pairs.push((a, b, t, friction));
+                }
+            }
+        });
+        pairs.sort_unstable_by_key(|p| (p.0, p.1));
+        self.pairs = pairs;
+    }
+
+    /// Particle against triangle: the triangles sorted by the cell of their centres (cells
+    /// the largest thickness plus the reach plus the widest triangle's radius wide), the
+    /// particles by theirs; a triangle not its particle's, within the reach of it, and not
+    /// within twice the thickness of it at rest on one cloth.
+    fn find_faces(&mut self, packed: &Packed) {
+        self.faces.clear();
+        if self.triangles.is_empty() {
+            return;
+        }
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        self.centres.clear();
+        let mut widest = 0.0f64;
+        for t in &self.triangles {
+            let corners = t.at.map(|i| x[i as usize]);
+            let m = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let r = (corners.iter())
+                .map(|c| (*c - m).length_squared())
+                .fold(0.0, f64::max)
+                .sqrt();
+            if r.is_finite() {
+                widest = widest.max(r);
+            }
+            self.centres.push((m, r));
+        }
+        let cell = self.thickest() + self.reach + widest;
+        self.cells.clear();
+        self.cells.extend(
+            (0u32..)
+                .zip(&self.members)
+                .filter(|(_, m)| x[m.0 as usize].is_finite())
+                .map(|(s, m)| (search::key(x[m.0 as usize], cell), s)),
+        );
+        self.triangle_cells.clear();
+        self.triangle_cells.extend(
+            (0u32..)
+                .zip(&self.centres)
+                .filter(|(_, c)| c.1.is_finite())
+                .map(|(k, c)| (search::key(c.0, cell), k)),
+        );
+        use rayon::prelude::*;
+        self.cells.par_sort_unstable();
+        self.triangle_cells.par_sort_unstable();
+        // The particles' cells in runs of whole cells, searched side by side; the candidates
+        // are sorted after, so the split does not change them.
+        let runs = split_runs(&self.cells, 4 * rayon::current_num_threads());
+        let found: Vec<Vec<Face>> = (runs.par_iter())
+            .map(|r| self.faces_of(&self.cells[r.clone()], x, inv))
+            .collect();
+        self.faces.extend(found.into_iter().flatten());
+    }
+
+    /// The candidates of the particles of `cells` (whole runs of cells) against the
+    /// triangles.
+    fn faces_of(&self, cells: &[(u64, u32)], x: &[DVec3], inv: &[f64]) -> Vec<Face> {
+        let mut faces = Vec::new();
+        search::beside(cells, &self.triangle_cells, |run, near| {
+            for &(_, s) in run {
+                let (p, lp, rp) = self.members[s as usize];
+                let xp = x[p as usize];
+                for &(_, k) in near.iter().copied().flatten() {
+                    let tri = self.triangles[k as usize];
+                    if tri.at.contains(&p) {
+                        continue;
+                    }
+                    let (t, friction) = self.combine(lp, tri.layer);
+                    let swept = tri.slots.map(|s| self.swept[s as usize]);
+                    let reach = t
+                        + self.margin
+                        + self.swept[s as usize]
+                        + swept[0].max(swept[1]).max(swept[2]);
+                    let (m, r) = self.centres[k as usize];
+                    if (xp - m).length_squared() >= (reach + r) * (reach + r) {
+                        continue;
+                    }
+                    let [a, b, c] = tri.at.map(|i| x[i as usize]);
+                    let w = search::closest_on_triangle(xp, a, b, c);
+                    let q = a * w[0] + b * w[1] + c * w[2];
+                    let held = tri.at.iter().all(|&i| inv[i as usize] == 0.0);
+                    if (xp - q).length_squared() >= reach * reach
+                        || (held && inv[p as usize] == 0.0)
+                    {
+                        continue;
+                    }
+                    if lp == tri.layer {
+                        let [a, b, c] = tri.slots.map(|s| self.members[s as usize].2);
+                        let w = search::closest_on_triangle(rp, a, b, c);
+                        let near = 2.0 * self.layers[lp as usize].thickness;
+                        if (rp - (a * w[0] + b * w[1] + c * w[2])).length_squared() < near * near {
+                            continue;
+                        }
+                    }
+                    faces.push(Face {
+                        p,
+                        triangle: k,
+                        thickness: t,
+                        friction,
+                    });
+                }
+            }
+        });
+        faces
+    }
+
+    /// The candidates, and the times they were found since the stage was gathered.
+    pub(crate) fn pair_count(&self) -> (usize, u64) {
+        (self.pairs.len() + self.faces.len(), self.rebuilds)
+    }
+
+    /// After a substep's springs: one pass over the candidates in order (particle against
+    /// particle, then against triangle); the change of the particles' own energy booked.
+    /// Returns whether any moved: the springs' change, from [`Self::moves`], is then the
+    /// caller's to add.
+    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
+        self.refresh(packed);
+        let n = self.moves.moved.len();
+        self.moves.reset(n);
+        let mut any = false;
+        let mut touch = contact::Touch {
+            x: &mut packed.x,
+            v: &mut packed.v,
+            inv: &packed.inv_mass,
+            moves: &mut self.moves,
+            before_v: &mut self.before_v,
+            active: &mut self.active,
+        };
+        touch.active.clear();
+        for &(a, b, t, friction) in &self.pairs {
+            any |= touch.points(a as usize, b as usize, t, friction);
+        }
+        for f in &self.faces {
+            let at = self.triangles[f.triangle as usize].at;
+            any |= touch.face(f.p as usize, at, &self.start, f.thickness, f.friction);
+        }
+        for _ in 1..VELOCITY_PASSES {
+            touch.settle();
+        }
+        if any {
+            (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
+        }
+        self.keep_start(packed);
+        any
+    }
+
+    /// What the last pass moved.
+    pub(crate) fn moves(&self) -> &crate::audit::Moves {
+        &self.moves
+    }
+}
+
+/// `cells` (sorted) cut into about `parts` ranges of whole runs of one key.
+fn split_runs(cells: &[(u64, u32)], parts: usize) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let mut from = 0;
+    for k in 1..=parts {
+        let mut to = (cells.len() * k / parts).max(from);
+        while to < cells.len() && to > 0 && cells[to].0 == cells[to - 1].0 {
+            to += 1;
+        }
+        if to > from {
+            out.push(from..to);
+            from = to;
+        }
+    }
+    out
+}

@@ -1,0 +1,158 @@
+//! Finding the candidates: members and triangles sorted by a cell key, each cell's neighbours
+//! found by cursors that only move on (no hashing, so one fixed order on any thread count).
+
+use glam::DVec3;
+
+/// The furthest cell from the origin a key tells apart, on each axis.
+const SPAN: f64 = ((1 << 20) - 2) as f64;
+
+/// The key of the cell of side `cell` holding `p`: each coordinate in its 21 bits (far cells
+/// share the edge ones: the distance decides), so the keys sort as the cells do, a column's
+/// cells in a row.
+pub(super) fn key(p: DVec3, cell: f64) -> u64 {
+    let c = (p / cell).floor();
+    let f = |v: f64| (v.clamp(-SPAN, SPAN) as i64 + (1 << 20)) as u64;
+    (f(c.x) << 42) | (f(c.y) << 21) | f(c.z)
+}
+
+/// For each run of one cell in `a` (sorted by key), `visit(run, near)` with the nine runs of
+/// `b` (sorted by key, keyed with the same cell) that hold the three cells of each column
+/// beside it: together the 27 cells around the run's, in a fixed order.
+pub(super) fn beside<'b>(
+    a: &[(u64, u32)],
+    b: &'b [(u64, u32)],
+    mut visit: impl FnMut(&[(u64, u32)], &[&'b [(u64, u32)]; 9]),
+) {
+    let columns: [i64; 9] = std::array::from_fn(|j| {
+        let (dx, dy) = (j as i64 / 3 - 1, j as i64 % 3 - 1);
+        (dx << 42) + (dy << 21)
+    });
+    let (mut starts, mut ends) = ([0usize; 9], [0usize; 9]);
+    let mut near: [&[(u64, u32)]; 9] = [&[]; 9];
+    let mut lo = 0;
+    while lo < a.len() {
+        let c = a[lo].0;
+        let hi = lo + a[lo..].partition_point(|e| e.0 == c);
+        for (j, &column) in columns.iter().enumerate() {
+            let (from, to) = (
+                (c as i64 + column - 1) as u64,
+                (c as i64 + column + 1) as u64,
+            );
+            while starts[j] < b.len() && b[starts[j]].0 < from {
+                starts[j] += 1;
+            }
+            ends[j] = ends[j].max(starts[j]);
+            while ends[j] < b.len() && b[ends[j]].0 <= to {
+                ends[j] += 1;
+            }
+            near[j] = &b[starts[j]..ends[j]];
+        }
+        visit(&a[lo..hi], &near);
+        lo = hi;
+    }
+}
+
+/// The barycentric weights of the point of triangle `(a, b, c)` closest to `p` (Ericson,
+/// *Real-Time Collision Detection*, 5.1.5): by the Voronoi region of `p`, the vertex, edge or
+/// face. A degenerate triangle gives its nearest vertex or edge point.
+pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let sum = va + vb + vc;
+    if sum.is_nan() || sum <= 0.0 {
+        // Degenerate (collinear) and past every test above: the nearer of a's edges.
+        return [1.0, 0.0, 0.0];
+    }
+    let (v, w) = (vb / sum, vc / sum);
+    [1.0 - v - w, v, w]
+}
+
+/// The barycentric weights of `p`'s projection onto the plane of triangle `(a, b, c)`,
+/// unclamped (outside the triangle some are negative); `None` for a degenerate triangle.
+pub(crate) fn plane_weights(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<[f64; 3]> {
+    let n = (b - a).cross(c - a);
+    let nn = n.length_squared();
+    if nn.is_nan() || nn <= 0.0 {
+        return None;
+    }
+    let v = (p - a).cross(c - a).dot(n) / nn;
+    let w = (b - a).cross(p - a).dot(n) / nn;
+    Some([1.0 - v - w, v, w])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The closest point against a brute-force search over a fine barycentric lattice.
+    #[test]
+    fn the_closest_point_is_the_lattices_nearest() {
+        let mut seed = 7u64;
+        let mut r = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for _ in 0..200 {
+            let v = |r: &mut dyn FnMut() -> f64| DVec3::new(r(), r(), r());
+            let (a, b, c, p) = (v(&mut r), v(&mut r), v(&mut r), v(&mut r) * 1.5);
+            let w = closest_on_triangle(p, a, b, c);
+            assert!(
+                w.iter().all(|&w| (-1e-12..=1.0 + 1e-12).contains(&w)),
+                "{w:?}"
+            );
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            let q = a * w[0] + b * w[1] + c * w[2];
+            let n = 200;
+            let mut best = f64::MAX;
+            for i in 0..=n {
+                for j in 0..=n - i {
+                    let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                    let s = a * (1.0 - u - v) + b * u + c * v;
+                    best = best.min((p - s).length());
+                }
+            }
+            let d = (p - q).length();
+            assert!(d <= best + 1e-12, "{d} > lattice {best}");
+            assert!(best - d < 0.02, "{d} far under lattice {best}");
+        }
+    }
+
+    #[test]
+    fn plane_weights_give_back_the_point_in_the_plane() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Z);
+        let w = plane_weights(DVec3::new(0.25, 3.0, 0.5), a, b, c).unwrap();
+        assert!((w[0] - 0.25).abs() < 1e-15 && (w[1] - 0.25).abs() < 1e-15);
+        assert!((w[2] - 0.5).abs() < 1e-15);
+        assert!(plane_weights(DVec3::ONE, a, a, c).is_none());
+    }
+}
