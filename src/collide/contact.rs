@@ -67,6 +67,11 @@ impl Touch<'_> {
         if w.is_nan() || w <= 0.0 {
             return false;
         }
+        // A point near a held corner of a triangle whose other corners are free, against a
+        // held particle, would throw the free corner by `over / bᵢ`: at most 4 `over` (the
+        // point then moves less than `over`; its neighbours' contacts take the rest).
+        let widest = others.iter().map(|&(i, c)| c * inv[i]).fold(wp, f64::max);
+        let w = w.max(0.25 * widest);
         self.touch(p);
         for &(i, _) in others {
             self.touch(i);

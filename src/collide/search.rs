@@ -1,7 +1,13 @@
 //! Finding the candidates: members and triangles sorted by a cell key, each cell's neighbours
-//! found by cursors that only move on (no hashing, so one fixed order on any thread count).
+//! found by cursors that only move on (no hashing, so one fixed order on any thread count);
+//! and the closest-point queries they and the pass use.
+
+use std::ops::Range;
 
 use glam::DVec3;
+
+use super::{contact, CollideStage, Face};
+use crate::buffers::Packed;
 
 /// The furthest cell from the origin a key tells apart, on each axis.
 const SPAN: f64 = ((1 << 20) - 2) as f64;
@@ -15,20 +21,20 @@ pub(super) fn key(p: DVec3, cell: f64) -> u64 {
     (f(c.x) << 42) | (f(c.y) << 21) | f(c.z)
 }
 
-/// For each run of one cell in `a` (sorted by key), `visit(run, near)` with the nine runs of
-/// `b` (sorted by key, keyed with the same cell) that hold the three cells of each column
+/// For each run of one cell in `a` (sorted by key), `visit(run, near)` with the nine ranges
+/// of `b` (sorted by key, keyed with the same cell) that hold the three cells of each column
 /// beside it: together the 27 cells around the run's, in a fixed order.
-pub(super) fn beside<'b>(
+pub(super) fn beside(
     a: &[(u64, u32)],
-    b: &'b [(u64, u32)],
-    mut visit: impl FnMut(&[(u64, u32)], &[&'b [(u64, u32)]; 9]),
+    b: &[(u64, u32)],
+    mut visit: impl FnMut(&[(u64, u32)], &[Range<usize>; 9]),
 ) {
     let columns: [i64; 9] = std::array::from_fn(|j| {
         let (dx, dy) = (j as i64 / 3 - 1, j as i64 % 3 - 1);
         (dx << 42) + (dy << 21)
     });
     let (mut starts, mut ends) = ([0usize; 9], [0usize; 9]);
-    let mut near: [&[(u64, u32)]; 9] = [&[]; 9];
+    let mut near: [Range<usize>; 9] = std::array::from_fn(|_| 0..0);
     let mut lo = 0;
     while lo < a.len() {
         let c = a[lo].0;
@@ -45,11 +51,201 @@ pub(super) fn beside<'b>(
             while ends[j] < b.len() && b[ends[j]].0 <= to {
                 ends[j] += 1;
             }
-            near[j] = &b[starts[j]..ends[j]];
+            near[j] = starts[j]..ends[j];
         }
         visit(&a[lo..hi], &near);
         lo = hi;
     }
+}
+
+impl CollideStage {
+    pub(super) fn thickest(&self) -> f64 {
+        self.layers.iter().map(|l| l.thickness).fold(0.0, f64::max)
+    }
+
+    /// The pair's thickness and friction: the means of the two layers'.
+    fn combine(&self, la: u16, lb: u16) -> (f64, contact::Friction) {
+        let (pa, pb) = (self.layers[la as usize], self.layers[lb as usize]);
+        let t = 0.5 * (pa.thickness + pb.thickness);
+        let mu = 0.5 * (pa.kinetic_friction + pb.kinetic_friction);
+        let mu_s = 0.5 * (pa.friction + pb.friction);
+        (t, (mu, mu_s))
+    }
+
+    /// Particle against particle between layers without triangles.
+    pub(super) fn find_pairs(&mut self, packed: &Packed) {
+        self.pairs.clear();
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        let cell = self.thickest() + self.reach;
+        self.cells.clear();
+        self.cells.extend(
+            (0u32..)
+                .zip(&self.members)
+                .filter(|(_, m)| !self.surfaced[m.1 as usize] && x[m.0 as usize].is_finite())
+                .map(|(s, m)| (key(x[m.0 as usize], cell), s)),
+        );
+        if self.cells.is_empty() {
+            return;
+        }
+        self.cells.sort_unstable();
+        let mut pairs = std::mem::take(&mut self.pairs);
+        beside(&self.cells, &self.cells, |run, near| {
+            for &(_, s) in run {
+                let (a, la, ra) = self.members[s as usize];
+                for &(_, u) in near.iter().flat_map(|r| &self.cells[r.clone()]) {
+                    let (b, lb, rb) = self.members[u as usize];
+                    if b <= a {
+                        continue;
+                    }
+                    let (t, friction) = self.combine(la, lb);
+                    let reach = t + self.margin + self.swept[s as usize] + self.swept[u as usize];
+                    if (x[b as usize] - x[a as usize]).length_squared() >= reach * reach
+                        || inv[a as usize] + inv[b as usize] == 0.0
+                    {
+                        continue;
+                    }
+                    let near = 2.0 * self.layers[la as usize].thickness;
+                    if la == lb && (rb - ra).length_squared() < near * near {
+                        continue;
+                    }
+                    pairs.push((a, b, t, friction));
+                }
+            }
+        });
+        pairs.sort_unstable_by_key(|p| (p.0, p.1));
+        self.pairs = pairs;
+    }
+
+    /// Particle against triangle: the triangles sorted by the cell of their centres (cells
+    /// the largest thickness plus the reach plus the widest triangle's radius wide), the
+    /// particles by theirs; a triangle not its particle's, within the reach of it, and not
+    /// within twice the thickness of it at rest on one cloth.
+    pub(super) fn find_faces(&mut self, packed: &Packed) {
+        self.faces.clear();
+        if self.triangles.is_empty() {
+            return;
+        }
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        self.centres.clear();
+        let mut widest = 0.0f64;
+        for t in &self.triangles {
+            let corners = t.at.map(|i| x[i as usize]);
+            let m = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let r = (corners.iter())
+                .map(|c| (*c - m).length_squared())
+                .fold(0.0, f64::max)
+                .sqrt();
+            if r.is_finite() {
+                widest = widest.max(r);
+            }
+            self.centres.push((m, r));
+        }
+        let cell = self.thickest() + self.reach + widest;
+        self.cells.clear();
+        self.cells.extend(
+            (0u32..)
+                .zip(&self.members)
+                .filter(|(_, m)| x[m.0 as usize].is_finite())
+                .map(|(s, m)| (key(x[m.0 as usize], cell), s)),
+        );
+        self.triangle_cells.clear();
+        self.triangle_cells.extend(
+            (0u32..)
+                .zip(&self.centres)
+                .filter(|(_, c)| c.1.is_finite())
+                .map(|(k, c)| (key(c.0, cell), k)),
+        );
+        use rayon::prelude::*;
+        self.cells.par_sort_unstable();
+        self.triangle_cells.par_sort_unstable();
+        // The centres beside their keys, so the search reads them in order.
+        self.centres_sorted.clear();
+        (self.centres_sorted).extend(self.triangle_cells.iter().map(|&(_, k)| {
+            let (m, r) = self.centres[k as usize];
+            (m, r, k)
+        }));
+        // The particles' cells in runs of whole cells, searched side by side; the candidates
+        // are sorted after, so the split does not change them.
+        let runs = split_runs(&self.cells, 4 * rayon::current_num_threads());
+        let found: Vec<Vec<Face>> = (runs.par_iter())
+            .map(|r| self.faces_of(&self.cells[r.clone()], x, inv))
+            .collect();
+        self.faces.extend(found.into_iter().flatten());
+    }
+
+    /// The candidates of the particles of `cells` (whole runs of cells) against the
+    /// triangles.
+    fn faces_of(&self, cells: &[(u64, u32)], x: &[DVec3], inv: &[f64]) -> Vec<Face> {
+        let mut faces = Vec::new();
+        let reach_max = self.thickest() + self.reach;
+        beside(cells, &self.triangle_cells, |run, near| {
+            for &(_, s) in run {
+                let (p, lp, rp) = self.members[s as usize];
+                let xp = x[p as usize];
+                for &(m, r, k) in near.iter().flat_map(|r| &self.centres_sorted[r.clone()]) {
+                    // Within the widest reach of the centre first, from the sorted copy.
+                    let widest = reach_max + r;
+                    if (xp - m).length_squared() >= widest * widest {
+                        continue;
+                    }
+                    let tri = self.triangles[k as usize];
+                    if tri.at.contains(&p) {
+                        continue;
+                    }
+                    let (t, friction) = self.combine(lp, tri.layer);
+                    let swept = tri.slots.map(|s| self.swept[s as usize]);
+                    let reach = t
+                        + self.margin
+                        + self.swept[s as usize]
+                        + swept[0].max(swept[1]).max(swept[2]);
+                    if (xp - m).length_squared() >= (reach + r) * (reach + r) {
+                        continue;
+                    }
+                    let [a, b, c] = tri.at.map(|i| x[i as usize]);
+                    let w = closest_on_triangle(xp, a, b, c);
+                    let q = a * w[0] + b * w[1] + c * w[2];
+                    let held = tri.at.iter().all(|&i| inv[i as usize] == 0.0);
+                    if (xp - q).length_squared() >= reach * reach
+                        || (held && inv[p as usize] == 0.0)
+                    {
+                        continue;
+                    }
+                    if lp == tri.layer {
+                        let [a, b, c] = tri.slots.map(|s| self.members[s as usize].2);
+                        let w = closest_on_triangle(rp, a, b, c);
+                        let near = 2.0 * self.layers[lp as usize].thickness;
+                        if (rp - (a * w[0] + b * w[1] + c * w[2])).length_squared() < near * near {
+                            continue;
+                        }
+                    }
+                    faces.push(Face {
+                        p,
+                        triangle: k,
+                        thickness: t,
+                        friction,
+                    });
+                }
+            }
+        });
+        faces
+    }
+}
+
+/// `cells` (sorted) cut into about `parts` ranges of whole runs of one key.
+fn split_runs(cells: &[(u64, u32)], parts: usize) -> Vec<std::ops::Range<usize>> {
+    let mut out = Vec::new();
+    let mut from = 0;
+    for k in 1..=parts {
+        let mut to = (cells.len() * k / parts).max(from);
+        while to < cells.len() && to > 0 && cells[to].0 == cells[to - 1].0 {
+            to += 1;
+        }
+        if to > from {
+            out.push(from..to);
+            from = to;
+        }
+    }
+    out
 }
 
 /// The barycentric weights of the point of triangle `(a, b, c)` closest to `p` (Ericson,

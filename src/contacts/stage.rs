@@ -134,6 +134,11 @@ impl ContactStage {
     }
 
     /// The state may have been edited between frames: the first substep copies it.
+    /// Per particle: the last contact pass on the host moved it (empty before one ran).
+    pub(crate) fn touched(&self) -> &[bool] {
+        &self.touched
+    }
+
     pub fn begin_frame(&mut self) {
         self.stats = ContactStats::default();
         self.energy = ProjectionLines::default();

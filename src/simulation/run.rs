@@ -281,6 +281,9 @@ impl Run<'_> {
             }
             (StageKind::SelfCollision, _) => {
                 self.state_to_host()?;
+                if let (Some(c), Some(p)) = (self.collide.as_mut(), self.coupling.as_mut()) {
+                    c.ground(p.stage().touched());
+                }
                 if let Some(c) = self.collide.as_mut() {
                     if c.project(self.packed, self.gravity) {
                         c.energy += self.auditor.spring_change(self.packed, c.moves());

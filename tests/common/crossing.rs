@@ -33,6 +33,11 @@ pub fn triangles_cross(a: [DVec3; 3], b: [DVec3; 3]) -> bool {
 /// The pairs of `triangles` (indices into `x`) sharing no corner that intersect: a sweep
 /// over their bounding boxes sorted along x, then the exact test.
 pub fn crossing_pairs(x: &[DVec3], triangles: &[[u32; 3]]) -> usize {
+    crossing_list(x, triangles).len()
+}
+
+/// Those pairs, as indices into `triangles`.
+pub fn crossing_list(x: &[DVec3], triangles: &[[u32; 3]]) -> Vec<(usize, usize)> {
     let boxes: Vec<(DVec3, DVec3, usize)> = (triangles.iter().enumerate())
         .map(|(k, t)| {
             let c = t.map(|i| x[i as usize]);
@@ -41,7 +46,7 @@ pub fn crossing_pairs(x: &[DVec3], triangles: &[[u32; 3]]) -> usize {
         .collect();
     let mut order: Vec<usize> = (0..boxes.len()).collect();
     order.sort_by(|&i, &j| boxes[i].0.x.total_cmp(&boxes[j].0.x));
-    let mut count = 0;
+    let mut out = Vec::new();
     for (n, &i) in order.iter().enumerate() {
         let (lo, hi, ki) = boxes[i];
         for &j in &order[n + 1..] {
@@ -57,9 +62,47 @@ pub fn crossing_pairs(x: &[DVec3], triangles: &[[u32; 3]]) -> usize {
                 continue;
             }
             if triangles_cross(ta.map(|v| x[v as usize]), tb.map(|v| x[v as usize])) {
-                count += 1;
+                out.push((ki.min(kj), ki.max(kj)));
             }
         }
     }
-    count
+    out
+}
+
+/// The distance from `p` to the segment `a b`.
+fn to_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let s = if ab.length_squared() > 0.0 {
+        ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + ab * s)).length()
+}
+
+/// The distance from `p` to triangle `t`: to its plane where `p` projects inside it (all three
+/// edge tests on one side), else to its nearest edge.
+pub fn to_triangle(p: DVec3, t: [DVec3; 3]) -> f64 {
+    let n = (t[1] - t[0]).cross(t[2] - t[0]);
+    let edges = (0..3).map(|i| to_segment(p, t[i], t[(i + 1) % 3]));
+    let nearest = edges.fold(f64::MAX, f64::min);
+    if n.length_squared() == 0.0 {
+        return nearest;
+    }
+    let inside = (0..3).all(|i| (t[(i + 1) % 3] - t[i]).cross(p - t[i]).dot(n) >= 0.0);
+    if inside {
+        (p - t[0]).dot(n).abs() / n.length()
+    } else {
+        nearest
+    }
+}
+
+/// Whether triangles `a` and `b` are apart along the cloth at `rest`: no corner of one within
+/// `apart` of the other there (the self-collision stage leaves pairs nearer at rest than twice
+/// the thickness to the springs).
+pub fn apart_at_rest(rest: &[DVec3], a: [u32; 3], b: [u32; 3], apart: f64) -> bool {
+    let corners = |t: [u32; 3]| t.map(|v| rest[v as usize]);
+    let (ta, tb) = (corners(a), corners(b));
+    ta.iter().all(|&p| to_triangle(p, tb) >= apart)
+        && tb.iter().all(|&p| to_triangle(p, ta) >= apart)
 }
