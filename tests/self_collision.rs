@@ -96,46 +96,56 @@ fn a_sheet_rests_on_another_at_the_thickness() {
     assert!(sim.diagnostics().failure.is_none());
 }
 
-/// Two free 10×10 sheets (spacing 55.6 mm) thrown at each other without gravity, one offset
-/// by about half a cell, 45 mm thick: over the half diagonal (39.3 mm), so no particle fits
-/// through a cell of the other. They do not pass through (without collision they do), and the
-/// pushes and friction keep the total momentum (each pair's moves go by inverse mass).
+/// Two free 10×10 sheets (spacing 55.6 mm) thrown at each other without gravity for 30
+/// frames, one offset by about half a cell, with `extra` (RON) on both: the upper sheet's mean
+/// height over the lower's at the end, the drift of their total momentum, the most triangle
+/// pairs crossing at a frame's end (the exact test of `common::crossing`, not the stage's
+/// query) and the books.
+fn thrown(extra: &str) -> (f64, f64, usize, harmonic::EnergyAudit) {
+    let a = sheet(
+        10,
+        0.0,
+        false,
+        &format!("{extra}, velocity: (0.3, 1.0, 0.0)"),
+    );
+    let b = sheet(
+        10,
+        0.1,
+        false,
+        &format!("{extra}, velocity: (0.0, -1.0, 0.1)"),
+    );
+    let b = b.replace("origin: (-0.25, 0.1, -0.25)", "origin: (-0.22, 0.1, -0.22)");
+    let mut sim = Simulation::from_scene(&scene(&[a, b], 0.0)).unwrap();
+    let momentum =
+        |sim: &Simulation| -> DVec3 { sim.velocities().iter().map(|v| *v * (0.1 / 100.0)).sum() };
+    let p0 = momentum(&sim);
+    let triangles = sim.triangles().to_vec();
+    let mut most = 0;
+    for _ in 0..30 {
+        sim.step().unwrap();
+        most = most.max(common::crossing::crossing_pairs(
+            sim.positions(),
+            &triangles,
+        ));
+    }
+    let x = sim.positions();
+    let mean = |r: std::ops::Range<usize>| x[r].iter().map(|p| p.y).sum::<f64>() / 100.0;
+    (
+        mean(100..200) - mean(0..100),
+        (momentum(&sim) - p0).length(),
+        most,
+        sim.diagnostics().audit,
+    )
+}
+
+/// The sheets 45 mm thick: over the half diagonal (39.3 mm), so no particle fits through a
+/// cell of the other. They do not pass through (without collision they do), and the pushes and
+/// friction keep the total momentum (each contact's moves go by inverse mass).
 #[test]
 fn colliding_sheets_keep_their_momentum_and_their_order() {
-    let run = |extra: &str| {
-        let a = sheet(
-            10,
-            0.0,
-            false,
-            &format!("{extra}, velocity: (0.3, 1.0, 0.0)"),
-        );
-        let b = sheet(
-            10,
-            0.1,
-            false,
-            &format!("{extra}, velocity: (0.0, -1.0, 0.1)"),
-        );
-        let b = b.replace("origin: (-0.25, 0.1, -0.25)", "origin: (-0.22, 0.1, -0.22)");
-        let mut sim = Simulation::from_scene(&scene(&[a, b], 0.0)).unwrap();
-        let momentum = |sim: &Simulation| -> DVec3 {
-            sim.velocities().iter().map(|v| *v * (0.1 / 100.0)).sum()
-        };
-        let p0 = momentum(&sim);
-        for _ in 0..30 {
-            sim.step().unwrap();
-        }
-        let mean =
-            |r: std::ops::Range<usize>| sim.positions()[r].iter().map(|p| p.y).sum::<f64>() / 100.0;
-        let apart = mean(100..200) - mean(0..100);
-        (
-            apart,
-            (momentum(&sim) - p0).length(),
-            sim.diagnostics().audit,
-        )
-    };
-    let (through, _, _) = run("");
+    let (through, _, _, _) = thrown("");
     assert!(through < 0.0, "without collision they pass: {through}");
-    let (apart, drift, a) = run(", self_collision: Some((thickness: 0.045, friction: 0.5))");
+    let (apart, drift, _, a) = thrown(", self_collision: Some((thickness: 0.045, friction: 0.5))");
     println!(
         "apart {apart:.4} m; momentum drift {drift:.2e} kg m/s; contacts {:.3e} J",
         a.contacts
@@ -145,55 +155,14 @@ fn colliding_sheets_keep_their_momentum_and_their_order() {
     assert!(a.contacts > 0.0);
 }
 
-/// The most triangle pairs of `sim`'s that cross at the end of any of `frames` frames (the
-/// exact test of `common::crossing`, not the stage's query), and the last frame's positions.
-fn crossings_over(sim: &mut Simulation, frames: usize) -> (usize, Vec<DVec3>) {
-    let triangles = sim.triangles().to_vec();
-    let mut most = 0;
-    for _ in 0..frames {
-        sim.step().unwrap();
-        most = most.max(common::crossing::crossing_pairs(
-            sim.positions(),
-            &triangles,
-        ));
-    }
-    (most, sim.positions().to_vec())
-}
-
-/// The sheets above at 20 mm: under a cell's half diagonal (39.3 mm), so a particle of one
-/// fits through a cell of the other, which particles alone would let pass. The triangles
-/// hold it: no two triangles cross at the end of any frame, and the momentum is kept.
+/// The sheets at 20 mm: under a cell's half diagonal, so a particle of one fits through a
+/// cell of the other, which particles alone would let pass. The triangles hold it: no two
+/// triangles cross at the end of any frame, and the momentum is kept.
 #[test]
 fn thin_sheets_thrown_at_each_other_never_cross() {
-    let run = |extra: &str| {
-        let a = sheet(
-            10,
-            0.0,
-            false,
-            &format!("{extra}, velocity: (0.3, 1.0, 0.0)"),
-        );
-        let b = sheet(
-            10,
-            0.1,
-            false,
-            &format!("{extra}, velocity: (0.0, -1.0, 0.1)"),
-        );
-        let b = b.replace("origin: (-0.25, 0.1, -0.25)", "origin: (-0.22, 0.1, -0.22)");
-        let mut sim = Simulation::from_scene(&scene(&[a, b], 0.0)).unwrap();
-        let momentum = |sim: &Simulation| -> DVec3 {
-            sim.velocities().iter().map(|v| *v * (0.1 / 100.0)).sum()
-        };
-        let p0 = momentum(&sim);
-        let (most, x) = crossings_over(&mut sim, 30);
-        let mean = |r: std::ops::Range<usize>| x[r].iter().map(|p| p.y).sum::<f64>() / 100.0;
-        (
-            most,
-            mean(100..200) - mean(0..100),
-            (momentum(&sim) - p0).length(),
-        )
-    };
-    let (_, through, _) = run("");
-    let (most, apart, drift) = run(", self_collision: Some((thickness: 0.02, friction: 0.5))");
+    let (through, _, _, _) = thrown("");
+    let (apart, drift, most, _) =
+        thrown(", self_collision: Some((thickness: 0.02, friction: 0.5))");
     println!("apart {apart:.4} m ({through:.4} without collision); crossing pairs at a frame's end {most}; momentum drift {drift:.2e}");
     assert!(through < 0.0, "without collision they pass: {through}");
     assert!(apart > 0.0, "the upper sheet stays above: {apart}");

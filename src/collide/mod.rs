@@ -181,6 +181,9 @@ pub(crate) struct CollideStage {
     /// the triangle's index in `triangle_cells`' order.
     centres: Vec<(DVec3, f64)>,
     centres_sorted: Vec<(DVec3, f64, u32)>,
+    /// The particles' cells cut for the search's threads, and each part's candidates.
+    runs: Vec<std::ops::Range<usize>>,
+    found: Vec<Vec<Face>>,
     /// The members' positions when the candidates were found, and at the substep's start
     /// (packed indices; members only).
     built: Vec<DVec3>,

@@ -164,19 +164,25 @@ impl CollideStage {
             let (m, r) = self.centres[k as usize];
             (m, r, k)
         }));
-        // The particles' cells in runs of whole cells, searched side by side; the candidates
-        // are sorted after, so the split does not change them.
-        let runs = split_runs(&self.cells, 4 * rayon::current_num_threads());
-        let found: Vec<Vec<Face>> = (runs.par_iter())
-            .map(|r| self.faces_of(&self.cells[r.clone()], x, inv))
-            .collect();
-        self.faces.extend(found.into_iter().flatten());
+        // The particles' cells in runs of whole cells, searched side by side into buffers
+        // kept between finds, then joined in the cells' order: the split does not change them.
+        let mut runs = std::mem::take(&mut self.runs);
+        split_runs(&self.cells, 4 * rayon::current_num_threads(), &mut runs);
+        let mut found = std::mem::take(&mut self.found);
+        found.resize_with(runs.len(), Vec::new);
+        (found.par_iter_mut().zip(&runs)).for_each(|(out, r)| {
+            out.clear();
+            self.faces_of(&self.cells[r.clone()], x, inv, out);
+        });
+        for f in &found[..runs.len()] {
+            self.faces.extend_from_slice(f);
+        }
+        (self.runs, self.found) = (runs, found);
     }
 
     /// The candidates of the particles of `cells` (whole runs of cells) against the
     /// triangles.
-    fn faces_of(&self, cells: &[(u64, u32)], x: &[DVec3], inv: &[f64]) -> Vec<Face> {
-        let mut faces = Vec::new();
+    fn faces_of(&self, cells: &[(u64, u32)], x: &[DVec3], inv: &[f64], faces: &mut Vec<Face>) {
         let reach_max = self.thickest() + self.reach;
         beside(cells, &self.triangle_cells, |run, near| {
             for &(_, s) in run {
@@ -227,13 +233,12 @@ impl CollideStage {
                 }
             }
         });
-        faces
     }
 }
 
-/// `cells` (sorted) cut into about `parts` ranges of whole runs of one key.
-fn split_runs(cells: &[(u64, u32)], parts: usize) -> Vec<std::ops::Range<usize>> {
-    let mut out = Vec::new();
+/// `cells` (sorted) cut into about `parts` ranges of whole runs of one key, into `out`.
+fn split_runs(cells: &[(u64, u32)], parts: usize, out: &mut Vec<Range<usize>>) {
+    out.clear();
     let mut from = 0;
     for k in 1..=parts {
         let mut to = (cells.len() * k / parts).max(from);
@@ -245,7 +250,6 @@ fn split_runs(cells: &[(u64, u32)], parts: usize) -> Vec<std::ops::Range<usize>>
             from = to;
         }
     }
-    out
 }
 
 /// The barycentric weights of the point of triangle `(a, b, c)` closest to `p` (Ericson,
