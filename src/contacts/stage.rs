@@ -133,12 +133,12 @@ impl ContactStage {
         self.prev_valid = false;
     }
 
-    /// The state may have been edited between frames: the first substep copies it.
     /// Per particle: the last contact pass on the host moved it (empty before one ran).
     pub(crate) fn touched(&self) -> &[bool] {
         &self.touched
     }
 
+    /// The state may have been edited between frames: the first substep copies it.
     pub fn begin_frame(&mut self) {
         self.stats = ContactStats::default();
         self.energy = ProjectionLines::default();

@@ -281,8 +281,16 @@ impl Run<'_> {
             }
             (StageKind::SelfCollision, _) => {
                 self.state_to_host()?;
-                if let (Some(c), Some(p)) = (self.collide.as_mut(), self.coupling.as_mut()) {
-                    c.ground(p.stage().touched());
+                // What the host's contact pass touched (none where the contacts run on the
+                // device, whose pass the host does not see).
+                let host_contacts = (self.schedule.stages())
+                    .iter()
+                    .any(|s| s.kind == StageKind::Contacts && s.on == Backend::Cpu);
+                if let Some(c) = self.collide.as_mut() {
+                    match self.coupling.as_mut() {
+                        Some(p) if host_contacts => c.ground(p.stage().touched()),
+                        _ => c.ground(&[]),
+                    }
                 }
                 if let Some(c) = self.collide.as_mut() {
                     if c.project(self.packed, self.gravity) {
