@@ -48,7 +48,7 @@ const VELOCITY_PASSES: usize = 4;
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SelfCollision {
-    /// How close two of its particles may come (m): under its particle spacing.
+    /// How close a particle may come to a colliding triangle (m): under its particle spacing.
     pub thickness: f64,
     /// Static Coulomb friction between its layers (and with other cloths'): a sliding the
     /// normal impulse times this can stop, stops.
