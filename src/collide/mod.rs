@@ -180,7 +180,11 @@ pub(crate) struct CollideStage {
     /// Each triangle's centre and the radius about it that holds its corners; and both with
     /// the triangle's index in `triangle_cells`' order.
     centres: Vec<(DVec3, f64)>,
-    centres_sorted: Vec<(DVec3, f64, u32)>,
+    centres_sorted: Vec<(DVec3, f64, u32, u16)>,
+    /// Each member's triangles that never collide with it (neighbours along its cloth), by
+    /// slot: `excluded[excluded_at[s]..excluded_at[s + 1]]`, ascending.
+    excluded: Vec<u32>,
+    excluded_at: Vec<u32>,
     /// The particles' cells cut for the search's threads, and each part's candidates.
     runs: Vec<std::ops::Range<usize>>,
     found: Vec<Vec<Face>>,
@@ -258,6 +262,7 @@ impl CollideStage {
                 (self.triangles).push(Triangle { at, slots, layer });
             }
         }
+        self.find_excluded();
         let n = if self.members.is_empty() {
             0
         } else {

@@ -44,6 +44,10 @@ pub(super) fn beside(
                 (c as i64 + column - 1) as u64,
                 (c as i64 + column + 1) as u64,
             );
+            if lo == 0 {
+                // The first run's: a part of `a` may start anywhere in `b`.
+                starts[j] = b.partition_point(|e| e.0 < from);
+            }
             while starts[j] < b.len() && b[starts[j]].0 < from {
                 starts[j] += 1;
             }
@@ -162,7 +166,7 @@ impl CollideStage {
         self.centres_sorted.clear();
         (self.centres_sorted).extend(self.triangle_cells.iter().map(|&(_, k)| {
             let (m, r) = self.centres[k as usize];
-            (m, r, k)
+            (m, r, k, self.triangles[k as usize].layer)
         }));
         // The particles' cells in runs of whole cells, searched side by side into buffers
         // kept between finds, then joined in the cells' order: the split does not change them.
@@ -186,12 +190,18 @@ impl CollideStage {
         let reach_max = self.thickest() + self.reach;
         beside(cells, &self.triangle_cells, |run, near| {
             for &(_, s) in run {
-                let (p, lp, rp) = self.members[s as usize];
+                let (p, lp, _) = self.members[s as usize];
                 let xp = x[p as usize];
-                for &(m, r, k) in near.iter().flat_map(|r| &self.centres_sorted[r.clone()]) {
-                    // Within the widest reach of the centre first, from the sorted copy.
+                let excluded = &self.excluded[self.excluded_at[s as usize] as usize
+                    ..self.excluded_at[s as usize + 1] as usize];
+                let centres = near.iter().flat_map(|r| &self.centres_sorted[r.clone()]);
+                for &(m, r, k, layer) in centres {
+                    // Within the widest reach of the centre, and not a neighbour at rest, first:
+                    // from the sorted copy and the particle's own list, read in order.
                     let widest = reach_max + r;
-                    if (xp - m).length_squared() >= widest * widest {
+                    if (xp - m).length_squared() >= widest * widest
+                        || (layer == lp && excluded.binary_search(&k).is_ok())
+                    {
                         continue;
                     }
                     let tri = self.triangles[k as usize];
@@ -216,14 +226,6 @@ impl CollideStage {
                     {
                         continue;
                     }
-                    if lp == tri.layer {
-                        let [a, b, c] = tri.slots.map(|s| self.members[s as usize].2);
-                        let w = closest_on_triangle(rp, a, b, c);
-                        let near = 2.0 * self.layers[lp as usize].thickness;
-                        if (rp - (a * w[0] + b * w[1] + c * w[2])).length_squared() < near * near {
-                            continue;
-                        }
-                    }
                     faces.push(Face {
                         p,
                         triangle: k,
@@ -233,6 +235,76 @@ impl CollideStage {
                 }
             }
         });
+    }
+
+    /// Each member's triangles of its own layer (not its own) within twice its thickness at
+    /// rest: the neighbours along the cloth, which never collide. Found once, from the rest
+    /// places, sorted by triangle for each member.
+    pub(super) fn find_excluded(&mut self) {
+        self.excluded.clear();
+        self.excluded_at.clear();
+        self.excluded_at.resize(self.members.len() + 1, 0);
+        // Each triangle's centre at rest and the radius about it that holds its corners.
+        let rest: Vec<(DVec3, f64)> = (self.triangles.iter())
+            .map(|t| {
+                let corners = t.slots.map(|s| self.members[s as usize].2);
+                let m = (corners[0] + corners[1] + corners[2]) / 3.0;
+                let r = corners
+                    .iter()
+                    .map(|c| (*c - m).length())
+                    .fold(0.0, f64::max);
+                (m, r)
+            })
+            .collect();
+        let near = 2.0 * self.thickest();
+        let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
+        let cell = near + widest;
+        if self.triangles.is_empty() || !(cell.is_finite() && cell > 0.0) {
+            return;
+        }
+        let mut members: Vec<(u64, u32)> = (0u32..)
+            .zip(&self.members)
+            .filter(|(_, m)| m.2.is_finite())
+            .map(|(s, m)| (key(m.2, cell), s))
+            .collect();
+        let mut triangles: Vec<(u64, u32)> = (0u32..)
+            .zip(&rest)
+            .filter(|(_, r)| r.1.is_finite())
+            .map(|(k, r)| (key(r.0, cell), k))
+            .collect();
+        members.sort_unstable();
+        triangles.sort_unstable();
+        let mut pairs = Vec::new();
+        beside(&members, &triangles, |run, near| {
+            for &(_, s) in run {
+                let (p, lp, rp) = self.members[s as usize];
+                for &(_, k) in near.iter().flat_map(|r| &triangles[r.clone()]) {
+                    let tri = self.triangles[k as usize];
+                    if tri.layer != lp || tri.at.contains(&p) {
+                        continue;
+                    }
+                    // Within twice the layer's thickness of the triangle at rest.
+                    let near = 2.0 * self.layers[lp as usize].thickness;
+                    let (m, r) = rest[k as usize];
+                    if (rp - m).length_squared() >= (near + r) * (near + r) {
+                        continue;
+                    }
+                    let [a, b, c] = tri.slots.map(|s| self.members[s as usize].2);
+                    let w = closest_on_triangle(rp, a, b, c);
+                    if (rp - (a * w[0] + b * w[1] + c * w[2])).length_squared() < near * near {
+                        pairs.push((s, k));
+                    }
+                }
+            }
+        });
+        pairs.sort_unstable();
+        for &(s, k) in &pairs {
+            self.excluded.push(k);
+            self.excluded_at[s as usize + 1] += 1;
+        }
+        for s in 0..self.members.len() {
+            self.excluded_at[s + 1] += self.excluded_at[s];
+        }
     }
 }
 
