@@ -133,12 +133,7 @@ impl CollideStage {
         self.centres.clear();
         let mut widest = 0.0f64;
         for t in &self.triangles {
-            let corners = t.at.map(|i| x[i as usize]);
-            let m = (corners[0] + corners[1] + corners[2]) / 3.0;
-            let r = (corners.iter())
-                .map(|c| (*c - m).length_squared())
-                .fold(0.0, f64::max)
-                .sqrt();
+            let (m, r) = sphere(t.at.map(|i| x[i as usize]));
             if r.is_finite() {
                 widest = widest.max(r);
             }
@@ -244,17 +239,8 @@ impl CollideStage {
         self.excluded.clear();
         self.excluded_at.clear();
         self.excluded_at.resize(self.members.len() + 1, 0);
-        // Each triangle's centre at rest and the radius about it that holds its corners.
         let rest: Vec<(DVec3, f64)> = (self.triangles.iter())
-            .map(|t| {
-                let corners = t.slots.map(|s| self.members[s as usize].2);
-                let m = (corners[0] + corners[1] + corners[2]) / 3.0;
-                let r = corners
-                    .iter()
-                    .map(|c| (*c - m).length())
-                    .fold(0.0, f64::max);
-                (m, r)
-            })
+            .map(|t| sphere(t.slots.map(|s| self.members[s as usize].2)))
             .collect();
         let near = 2.0 * self.thickest();
         let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
@@ -306,6 +292,16 @@ impl CollideStage {
             self.excluded_at[s + 1] += self.excluded_at[s];
         }
     }
+}
+
+/// A triangle's centre and the radius about it that holds its corners.
+fn sphere(corners: [DVec3; 3]) -> (DVec3, f64) {
+    let m = (corners[0] + corners[1] + corners[2]) / 3.0;
+    let r = (corners.iter())
+        .map(|c| (*c - m).length_squared())
+        .fold(0.0, f64::max)
+        .sqrt();
+    (m, r)
 }
 
 /// `cells` (sorted) cut into about `parts` ranges of whole runs of one key, into `out`.
