@@ -5,6 +5,7 @@
 
 use glam::DVec3;
 
+use super::edges::{coplanar_times, line_parameters, segment_weights};
 use super::search::{closest_on_triangle, plane_weights};
 use crate::audit::Moves;
 
@@ -19,17 +20,23 @@ pub(super) struct Touch<'a> {
     pub(super) active: &'a mut Vec<Active>,
 }
 
-/// A contact the pass pushed: the particle, the point's corners and weights (a particle
-/// against a particle has one, weight 1, and two unused), the normal, `W`, and the normal
-/// impulse (per unit of `W`) it has given so far.
+/// A contact the pass pushed: its two sides' particles and weights (a particle: one, weight 1;
+/// an edge's point: two; a triangle's: three; the rest unused), the normal, `W`, and the
+/// normal impulse (per unit of `W`) it has given so far.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Active {
-    p: usize,
+    ours: [(usize, f64); 2],
+    ours_count: usize,
     others: [(usize, f64); 3],
     count: usize,
     n: DVec3,
     w: f64,
     impulse: f64,
+}
+
+/// The velocity of a side's point: its particles' by their weights.
+fn velocity(v: &[DVec3], side: &[(usize, f64)]) -> DVec3 {
+    side.iter().map(|&(i, c)| v[i] * c).sum()
 }
 
 /// A contact's friction: kinetic, then static.
@@ -47,56 +54,62 @@ impl Touch<'_> {
         );
     }
 
-    /// Particle `p` against the point `q = Σ wᵢ x[i]` of `others` (weights summing to 1),
-    /// `over` (m) closer along the normal `n` (from `q` towards `p`) than the thickness: the
-    /// gap opened by a move along `n` of generalised inverse mass `W = w_p + Σ wᵢ² wᵢ`
-    /// (`λ = over / W`, `p` by `λ w_p`, each other by `−λ wᵢ w_i`), then the approach and
-    /// the sliding removed the same way, so the momentum is kept. Returns whether it moved
-    /// (nothing does where every mass is held).
+    /// The point `p = Σ cᵢ x[i]` of `ours` against the point `q = Σ wᵢ x[i]` of `others`
+    /// (each side's weights summing to 1), `over` (m) closer along the normal `n` (from `q`
+    /// towards `p`) than the thickness: the gap opened by a move along `n` of generalised
+    /// inverse mass `W = Σ cᵢ² wᵢ + Σ wᵢ² wᵢ` (`λ = over / W`, each of ours by `λ cᵢ wᵢ`,
+    /// each other by `−λ wᵢ wᵢ`), then the approach and the sliding removed the same way, so
+    /// the momentum is kept. Returns whether it moved (nothing does where every mass is held).
     pub(super) fn push(
         &mut self,
-        p: usize,
+        ours: &[(usize, f64)],
         others: &[(usize, f64)],
         n: DVec3,
         over: f64,
         (mu, mu_s): Friction,
     ) -> bool {
         let inv = self.inv;
-        let wp = inv[p];
-        let w = wp + others.iter().map(|&(i, w)| w * w * inv[i]).sum::<f64>();
+        let mass = |side: &[(usize, f64)]| side.iter().map(|&(i, c)| c * c * inv[i]).sum::<f64>();
+        let w = mass(ours) + mass(others);
         if w.is_nan() || w <= 0.0 {
             return false;
         }
         // A point near a held corner of a triangle whose other corners are free, against a
         // held particle, would throw the free corner by `over / bᵢ`: at most 4 `over` (the
         // point then moves less than `over`; its neighbours' contacts take the rest).
-        let widest = others.iter().map(|&(i, c)| c * inv[i]).fold(wp, f64::max);
+        let widest = (ours.iter().chain(others))
+            .map(|&(i, c)| c * inv[i])
+            .fold(0.0, f64::max);
         let w = w.max(0.25 * widest);
-        self.touch(p);
-        for &(i, _) in others {
+        for &(i, _) in ours.iter().chain(others) {
             self.touch(i);
         }
         let lambda = over / w;
-        self.x[p] += n * (lambda * wp);
+        for &(i, c) in ours {
+            self.x[i] += n * (lambda * c * inv[i]);
+        }
         for &(i, c) in others {
             self.x[i] -= n * (lambda * c * inv[i]);
         }
-        let vq: DVec3 = others.iter().map(|&(i, c)| self.v[i] * c).sum();
-        let vr = self.v[p] - vq;
+        let vr = velocity(self.v, ours) - velocity(self.v, others);
         let vn = vr.dot(n);
-        let mut padded = [(p, 0.0); 3];
-        padded[..others.len()].copy_from_slice(others);
-        self.active.push(Active {
-            p,
-            others: padded,
+        let mut active = Active {
+            ours: [(0, 0.0); 2],
+            ours_count: ours.len(),
+            others: [(0, 0.0); 3],
             count: others.len(),
             n,
             w,
             impulse: (-vn).max(0.0) / w,
-        });
+        };
+        active.ours[..ours.len()].copy_from_slice(ours);
+        active.others[..others.len()].copy_from_slice(others);
+        self.active.push(active);
         if vn < 0.0 {
             let j = -vn / w;
-            self.v[p] += n * (j * wp);
+            for &(i, c) in ours {
+                self.v[i] += n * (j * c * inv[i]);
+            }
             for &(i, c) in others {
                 self.v[i] -= n * (j * c * inv[i]);
             }
@@ -109,7 +122,9 @@ impl Touch<'_> {
             };
             if slide > 0.0 {
                 let k = stop / w;
-                self.v[p] -= vt * (k * wp);
+                for &(i, c) in ours {
+                    self.v[i] -= vt * (k * c * inv[i]);
+                }
                 for &(i, c) in others {
                     self.v[i] += vt * (k * c * inv[i]);
                 }
@@ -126,16 +141,17 @@ impl Touch<'_> {
     pub(super) fn settle(&mut self) {
         let inv = self.inv;
         for c in self.active.iter_mut() {
-            let others = &c.others[..c.count];
-            let vq: DVec3 = others.iter().map(|&(i, k)| self.v[i] * k).sum();
-            let vn = (self.v[c.p] - vq).dot(c.n);
+            let (ours, others) = (&c.ours[..c.ours_count], &c.others[..c.count]);
+            let vn = (velocity(self.v, ours) - velocity(self.v, others)).dot(c.n);
             let impulse = (c.impulse - vn / c.w).max(0.0);
             let j = impulse - c.impulse;
             if j == 0.0 {
                 continue;
             }
             c.impulse = impulse;
-            self.v[c.p] += c.n * (j * inv[c.p]);
+            for &(i, k) in ours {
+                self.v[i] += c.n * (j * k * inv[i]);
+            }
             for &(i, k) in others {
                 self.v[i] -= c.n * (j * k * inv[i]);
             }
@@ -152,7 +168,7 @@ impl Touch<'_> {
         }
         let dist = dist2.sqrt();
         let n = if dist > 1e-9 * t { d / dist } else { DVec3::Y };
-        self.push(b, &[(a, 1.0)], n, t - dist, friction)
+        self.push(&[(b, 1.0)], &[(a, 1.0)], n, t - dist, friction)
     }
 
     /// Particle `p` against triangle `tri`, both at `start` at the substep's start. If `p`
@@ -186,7 +202,7 @@ impl Touch<'_> {
                 let q = a * w[0] + b * w[1] + c * w[2];
                 let over = t - n.dot(xp - q);
                 let others = [(ia, w[0]), (ib, w[1]), (ic, w[2])];
-                return self.push(p, &others, n, over, friction);
+                return self.push(&[(p, 1.0)], &others, n, over, friction);
             }
         }
         // Past the thickness from the plane, on the side it started on: not in contact.
@@ -208,6 +224,71 @@ impl Touch<'_> {
             (n1 * side).try_normalize().unwrap_or(DVec3::Y)
         };
         let others = [(ia, w[0]), (ib, w[1]), (ic, w[2])];
-        self.push(p, &others, n, t - dist, friction)
+        self.push(&[(p, 1.0)], &others, n, t - dist, friction)
+    }
+
+    /// Edge `e` against edge `f`, both at `start` at the substep's start. If they crossed
+    /// over the substep (at the first time their lines, each corner moving linearly, met
+    /// within both edges), `e` goes back to the side of `f` it was on just before, along their
+    /// common normal then, at the thickness `t`, from the points where they met; otherwise,
+    /// closer than `t`, they go apart at their closest points.
+    pub(super) fn edges(
+        &mut self,
+        [ia, ib]: [usize; 2],
+        [ic, id]: [usize; 2],
+        start: &[DVec3],
+        t: f64,
+        friction: Friction,
+    ) -> bool {
+        let x = &*self.x;
+        let (a, b, c, d) = (x[ia], x[ib], x[ic], x[id]);
+        let p0 = [ia, ib, ic, id].map(|i| start[i]);
+        let (roots, count) = coplanar_times(p0, [a, b, c, d]);
+        for &tau in &roots[..count] {
+            let q = [0, 1, 2, 3].map(|i| p0[i] + ([a, b, c, d][i] - p0[i]) * tau);
+            let Some((s, u)) = line_parameters(q[0], q[1], q[2], q[3]) else {
+                continue;
+            };
+            let apart = (q[0] + (q[1] - q[0]) * s) - (q[2] + (q[3] - q[2]) * u);
+            if !((0.0..=1.0).contains(&s)
+                && (0.0..=1.0).contains(&u)
+                && apart.length_squared() < 0.0625 * t * t)
+            {
+                continue;
+            }
+            // Just before, `e`'s point was on the side of `f`'s that its move relative to it,
+            // along their normal then, leaves behind.
+            let m = (q[1] - q[0]).cross(q[3] - q[2]);
+            let vp = (b - p0[1]) * s + (a - p0[0]) * (1.0 - s);
+            let vq = (d - p0[3]) * u + (c - p0[2]) * (1.0 - u);
+            let closing = (vp - vq).dot(m);
+            let Some(n) = (m * -closing.signum()).try_normalize() else {
+                break;
+            };
+            let (p, q) = (a + (b - a) * s, c + (d - c) * u);
+            let over = t - n.dot(p - q);
+            if over <= 0.0 {
+                break;
+            }
+            let (ours, others) = ([(ia, 1.0 - s), (ib, s)], [(ic, 1.0 - u), (id, u)]);
+            return self.push(&ours, &others, n, over, friction);
+        }
+        let (s, u) = segment_weights(a, b, c, d);
+        let (p, q) = (a + (b - a) * s, c + (d - c) * u);
+        let dist2 = (p - q).length_squared();
+        if dist2 >= t * t || !dist2.is_finite() {
+            return false;
+        }
+        let dist = dist2.sqrt();
+        let n = if dist > 1e-9 * t {
+            (p - q) / dist
+        } else {
+            // On each other: apart on the side `e` started on.
+            let m = (b - a).cross(d - c);
+            let side = -m.dot(p0[2] - p0[0]).signum();
+            (m * side).try_normalize().unwrap_or(DVec3::Y)
+        };
+        let (ours, others) = ([(ia, 1.0 - s), (ib, s)], [(ic, 1.0 - u), (id, u)]);
+        self.push(&ours, &others, n, t - dist, friction)
     }
 }

@@ -68,7 +68,7 @@ impl CollideStage {
     }
 
     /// The pair's thickness and friction: the means of the two layers'.
-    fn combine(&self, la: u16, lb: u16) -> (f64, contact::Friction) {
+    pub(super) fn combine(&self, la: u16, lb: u16) -> (f64, contact::Friction) {
         let (pa, pb) = (self.layers[la as usize], self.layers[lb as usize]);
         let t = 0.5 * (pa.thickness + pb.thickness);
         let mu = 0.5 * (pa.kinetic_friction + pb.kinetic_friction);
@@ -305,7 +305,7 @@ fn sphere(corners: [DVec3; 3]) -> (DVec3, f64) {
 }
 
 /// `cells` (sorted) cut into about `parts` ranges of whole runs of one key, into `out`.
-fn split_runs(cells: &[(u64, u32)], parts: usize, out: &mut Vec<Range<usize>>) {
+pub(super) fn split_runs(cells: &[(u64, u32)], parts: usize, out: &mut Vec<Range<usize>>) {
     out.clear();
     let mut from = 0;
     for k in 1..=parts {

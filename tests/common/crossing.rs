@@ -70,7 +70,7 @@ pub fn crossing_list(x: &[DVec3], triangles: &[[u32; 3]]) -> Vec<(usize, usize)>
 }
 
 /// The distance from `p` to the segment `a b`.
-fn to_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
+pub fn to_segment(p: DVec3, a: DVec3, b: DVec3) -> f64 {
     let ab = b - a;
     let s = if ab.length_squared() > 0.0 {
         ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
