@@ -37,8 +37,7 @@ fn sphere([a, b]: [DVec3; 2]) -> (DVec3, f64) {
 impl CollideStage {
     /// The edges of the triangles of the layers that ask for them, each once, in order of
     /// their ends; and each edge's edges of its own layer within twice its thickness at rest
-    /// (those sharing an end among them), which never collide with it: only those after it,
-    /// as the search pairs each edge with later ones.
+    /// (those sharing an end among them), which never collide with it.
     pub(super) fn gather_edges(&mut self) {
         self.edges.clear();
         let asked = |t: &&super::Triangle| self.layers[t.layer as usize].edges;
@@ -94,6 +93,9 @@ impl CollideStage {
                 }
             }
         });
+        // Both ways: the search meets a pair from whichever comes first in its cells' order.
+        let back: Vec<(u32, u32)> = pairs.iter().map(|&(s, u)| (u, s)).collect();
+        pairs.extend(back);
         pairs.sort_unstable();
         for &(s, u) in &pairs {
             self.edge_excluded.push(u);
@@ -105,9 +107,8 @@ impl CollideStage {
     }
 
     /// Edge against edge: the edges sorted by the cell of their midpoints (cells the largest
-    /// thickness plus the reach plus the longest edge wide); a later edge within the reach of
-    /// an edge, not within twice the thickness of it at rest on one cloth, and not held at
-    /// all four ends.
+    /// thickness plus the reach plus the longest edge wide); each pair within the reach, not
+    /// within twice the thickness at rest on one cloth, and not held at all four ends, once.
     pub(super) fn find_crossings(&mut self, packed: &Packed) {
         self.crossings.clear();
         if self.edges.is_empty() {
@@ -157,7 +158,8 @@ impl CollideStage {
         (self.runs, self.found_crossings) = (runs, found);
     }
 
-    /// The candidates of the edges of `cells` (whole runs of cells) against later edges.
+    /// The candidates of the edges of `cells` (whole runs of cells) against those after them
+    /// in the sorted order.
     fn crossings_of(
         &self,
         cells: &[(u64, u32)],
@@ -168,16 +170,20 @@ impl CollideStage {
         let reach_max = self.thickest() + self.reach;
         let swept = |e: &Edge| self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
         beside(cells, &self.edge_cells, |run, near| {
-            for &(_, s) in run {
+            for &(key, s) in run {
                 let e = self.edges[s as usize];
                 let (ms, rs) = self.edge_centres[s as usize];
                 let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
                     ..self.edge_excluded_at[s as usize + 1] as usize];
                 let held = |e: &Edge| e.at.iter().all(|&i| inv[i as usize] == 0.0);
-                for &(m, r, u, layer) in near.iter().flat_map(|r| &self.edge_sorted[r.clone()]) {
+                // Each pair once, from the first of the two in the sorted order: only the later
+                // entries of the run's column, and the columns after it.
+                let (from, to) = (near[4].start, near[4].end);
+                let from = from + self.edge_cells[from..to].partition_point(|&e| e <= (key, s));
+                let later = std::iter::once(from..to).chain(near[5..].iter().cloned());
+                for &(m, r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
                     let widest = reach_max + rs + r;
-                    if u <= s
-                        || (ms - m).length_squared() >= widest * widest
+                    if (ms - m).length_squared() >= widest * widest
                         || (layer == e.layer && excluded.binary_search(&u).is_ok())
                     {
                         continue;

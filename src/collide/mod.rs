@@ -193,7 +193,7 @@ pub(crate) struct CollideStage {
     /// slot: `excluded[excluded_at[s]..excluded_at[s + 1]]`, ascending.
     excluded: Vec<u32>,
     excluded_at: Vec<u32>,
-    /// The triangles' edges, each once; each edge's later edges that never collide with it,
+    /// The triangles' edges, each once; each edge's edges that never collide with it,
     /// as `excluded`; edge against edge, in the edges' cells' order.
     edges: Vec<edges::Edge>,
     edge_excluded: Vec<u32>,
