@@ -243,7 +243,17 @@ impl Touch<'_> {
         let x = &*self.x;
         let (a, b, c, d) = (x[ia], x[ib], x[ic], x[id]);
         let p0 = [ia, ib, ic, id].map(|i| start[i]);
-        let (roots, count) = coplanar_times(p0, [a, b, c, d]);
+        // No point of either edge moved further than its ends did: edges further apart at the
+        // start than the two ends' largest moves together cannot have met.
+        let (s0, u0) = segment_weights(p0[0], p0[1], p0[2], p0[3]);
+        let gap0 = (p0[0] + (p0[1] - p0[0]) * s0) - (p0[2] + (p0[3] - p0[2]) * u0);
+        let moved = |i: usize, e: DVec3| (e - p0[i]).length();
+        let reach = moved(0, a).max(moved(1, b)) + moved(2, c).max(moved(3, d));
+        let (roots, count) = if gap0.length() > reach {
+            ([0.0; 3], 0)
+        } else {
+            coplanar_times(p0, [a, b, c, d])
+        };
         for &tau in &roots[..count] {
             let q = [0, 1, 2, 3].map(|i| p0[i] + ([a, b, c, d][i] - p0[i]) * tau);
             let Some((s, u)) = line_parameters(q[0], q[1], q[2], q[3]) else {
