@@ -259,6 +259,8 @@ impl Touch<'_> {
             let Some((s, u)) = line_parameters(q[0], q[1], q[2], q[3]) else {
                 continue;
             };
+            // Coplanar and not parallel, the lines meet: within both edges, they met (the
+            // quarter thickness allows for the time's rounding).
             let apart = (q[0] + (q[1] - q[0]) * s) - (q[2] + (q[3] - q[2]) * u);
             if !((0.0..=1.0).contains(&s)
                 && (0.0..=1.0).contains(&u)

@@ -19,7 +19,7 @@ pub(super) struct Edge {
     layer: u16,
 }
 
-/// A candidate of an edge against another (indices into the edges, `a < b`), with the pair's
+/// A candidate of an edge against another (indices into the edges, each pair once), with the pair's
 /// thickness and friction.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Crossing {
