@@ -343,13 +343,7 @@ mod tests {
     /// The closest points against a brute-force search over both segments.
     #[test]
     fn the_closest_points_are_the_nearest_of_a_fine_search() {
-        let mut seed = 11u64;
-        let mut r = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut r = super::super::uniform(11);
         for k in 0..300 {
             let v = |r: &mut dyn FnMut() -> f64| DVec3::new(r(), r(), r());
             let (a, b, c) = (v(&mut r), v(&mut r), v(&mut r));
@@ -378,13 +372,7 @@ mod tests {
     /// cubic's sign.
     #[test]
     fn coplanar_times_are_the_cubics_roots() {
-        let mut seed = 5u64;
-        let mut r = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut r = super::super::uniform(5);
         let mut found = 0;
         for _ in 0..500 {
             let mut v = || DVec3::new(r(), r(), r());

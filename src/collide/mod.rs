@@ -45,6 +45,18 @@ const EDIT_REACH: f64 = 10.0;
 /// Passes over the pushed contacts' velocities each substep (the first with the pushes).
 const VELOCITY_PASSES: usize = 4;
 
+/// Seeded numbers uniform in [−1, 1) for the module's tests (a linear congruential
+/// generator's top 53 bits).
+#[cfg(test)]
+fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
 /// A cloth's self-collision, as a scene gives it (`self_collision: Some((thickness: 0.005,
 /// friction: 0.5))`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

@@ -383,13 +383,7 @@ mod tests {
     /// The closest point against a brute-force search over a fine barycentric lattice.
     #[test]
     fn the_closest_point_is_the_lattices_nearest() {
-        let mut seed = 7u64;
-        let mut r = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let mut r = super::super::uniform(7);
         for _ in 0..200 {
             let v = |r: &mut dyn FnMut() -> f64| DVec3::new(r(), r(), r());
             let (a, b, c, p) = (v(&mut r), v(&mut r), v(&mut r), v(&mut r) * 1.5);
