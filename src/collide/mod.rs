@@ -435,9 +435,9 @@ impl CollideStage {
     }
 
     /// After a substep's springs: one pass over the candidates in order (particle against
-    /// particle, against triangle, then edge against edge); the change of the particles' own energy booked.
-    /// Returns whether any moved: the springs' change, from [`Self::moves`], is then the
-    /// caller's to add.
+    /// particle, against triangle, then edge against edge); the change of the particles' own
+    /// energy booked. Returns whether any moved: the springs' change, from [`Self::moves`], is
+    /// then the caller's to add.
     pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
         self.refresh(packed);
         let n = self.moves.moved.len();
