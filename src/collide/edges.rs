@@ -6,7 +6,7 @@
 
 use glam::DVec3;
 
-use super::search::{beside, key, split_runs};
+use super::search::{beside, key, lists, split_runs};
 use super::{contact, CollideStage};
 use crate::buffers::Packed;
 
@@ -96,14 +96,11 @@ impl CollideStage {
         // Both ways: the search meets a pair from whichever comes first in its cells' order.
         let back: Vec<(u32, u32)> = pairs.iter().map(|&(s, u)| (u, s)).collect();
         pairs.extend(back);
-        pairs.sort_unstable();
-        for &(s, u) in &pairs {
-            self.edge_excluded.push(u);
-            self.edge_excluded_at[s as usize + 1] += 1;
-        }
-        for s in 0..self.edges.len() {
-            self.edge_excluded_at[s + 1] += self.edge_excluded_at[s];
-        }
+        lists(
+            &mut pairs,
+            &mut self.edge_excluded,
+            &mut self.edge_excluded_at,
+        );
     }
 
     /// Edge against edge: the edges sorted by the cell of their midpoints (cells the largest

@@ -283,14 +283,20 @@ impl CollideStage {
                 }
             }
         });
-        pairs.sort_unstable();
-        for &(s, k) in &pairs {
-            self.excluded.push(k);
-            self.excluded_at[s as usize + 1] += 1;
-        }
-        for s in 0..self.members.len() {
-            self.excluded_at[s + 1] += self.excluded_at[s];
-        }
+        lists(&mut pairs, &mut self.excluded, &mut self.excluded_at);
+    }
+}
+
+/// `pairs` `(s, k)` as each `s`'s `k`s, ascending, `list[at[s]..at[s + 1]]` (`at` holding one
+/// more entry than there are `s`, zeroed).
+pub(super) fn lists(pairs: &mut [(u32, u32)], list: &mut Vec<u32>, at: &mut [u32]) {
+    pairs.sort_unstable();
+    for &(s, k) in pairs.iter() {
+        list.push(k);
+        at[s as usize + 1] += 1;
+    }
+    for s in 1..at.len() {
+        at[s] += at[s - 1];
     }
 }
 
