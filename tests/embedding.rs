@@ -173,6 +173,55 @@ fn cloths_are_added_and_removed_as_units() {
     );
 }
 
+/// The same with a second cloth that has tethers, self-collision and a stretch limit, all
+/// kept per cloth from its first particle: removing the cloth before it leaves it moving as
+/// it would alone (its tethers and layer follow its particles up the scene order).
+#[test]
+fn a_removed_cloth_leaves_the_later_cloths_tethers_and_layers_whole() {
+    let scene = Scene::parse(
+        r#"Scene(dt: 0.01, substeps: 8, cloths: [
+    (origin: (-2.0, 1.0, -0.5), size: (1.0, 1.0), resolution: (10, 10), plane: Horizontal,
+     mass: 0.2, structural: (frequency: 30.0, damping_ratio: 0.1), pins: [TopLeft, TopRight]),
+    (origin: (1.0, 1.0, -0.5), size: (1.0, 1.0), resolution: (8, 8), plane: Horizontal,
+     mass: 0.2, structural: (frequency: 5.0, damping_ratio: 0.1), pins: [TopLeft],
+     tethers: Some((slack: 0.02, anchors: 1)), stretch_limit: Some((stretch: 0.3)),
+     self_collision: Some((thickness: 0.05))),
+])"#,
+        "two",
+    )
+    .unwrap();
+    let mut both = Simulation::from_scene(&scene).unwrap();
+    let mut alone_scene = scene.clone();
+    alone_scene.cloths.remove(0);
+    let mut alone = Simulation::from_scene(&alone_scene).unwrap();
+    let mut loose_scene = alone_scene.clone();
+    loose_scene.cloths[0].tethers = None;
+    let mut loose = Simulation::from_scene(&loose_scene).unwrap();
+    let id = both.cloths().next().unwrap().0;
+    both.step().unwrap();
+    both.remove_cloth(id).unwrap();
+    alone.step().unwrap();
+    loose.step().unwrap();
+    for _ in 0..60 {
+        both.step().unwrap();
+        alone.step().unwrap();
+        loose.step().unwrap();
+    }
+    let apart = |a: &Simulation, b: &Simulation| {
+        (a.positions().iter().zip(b.positions()))
+            .map(|(p, q)| p.distance(*q))
+            .fold(0.0, f64::max)
+    };
+    // The tethers act: without them the cloth hangs elsewhere.
+    assert!(apart(&alone, &loose) > 0.05, "{}", apart(&alone, &loose));
+    let worst = apart(&both, &alone);
+    assert!(
+        worst < 1e-12,
+        "the remaining cloth moved differently: {worst:e} m"
+    );
+    assert_eq!(both.collision_pairs().0, alone.collision_pairs().0);
+}
+
 /// A cloth whose springs component was despawned by hand is no longer a cloth: it leaves the
 /// cloth list and the triangles, removing it is an error, and its particles still step.
 #[test]

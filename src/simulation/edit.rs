@@ -169,14 +169,12 @@ impl Simulation {
             .filter(|(_, s)| doomed.contains(&s.a) || doomed.contains(&s.b))
             .map(|(e, _)| e)
             .collect();
-        // Cloth springs over any of its particles go too; later ones move up with theirs.
+        // Cloth springs over any of its particles go too.
         let (lo, hi) = (range.start as u64, range.end as u64);
-        for (e, c) in self.world.query_mut::<(Entity, &mut ClothSprings)>() {
+        for (e, c) in self.world.query::<(Entity, &ClothSprings)>().iter() {
             let r = c.grid.range();
             if r.start < hi && lo < r.end {
                 springs.push(e);
-            } else if r.start >= hi {
-                c.grid.first -= n;
             }
         }
         // A mesh's surface goes with it (a grid's is its springs' entity, listed above).
@@ -185,33 +183,46 @@ impl Simulation {
             let _ = self.world.despawn(e);
         }
         self.grabbed.retain(|e| !doomed.contains(e));
-        for i in self.world.query_mut::<&mut SceneIndex>() {
-            if i.0 >= range.end {
-                i.0 -= n;
+        if let Some(custom) = &mut self.frame.custom {
+            custom.retain(|t| !t.iter().any(|i| range.contains(i)));
+        }
+        self.renumber(range.end, -(n as i64));
+        self.frame.triangles.take();
+        self.frame.prev.clear();
+        self.dirty = true;
+        Ok(())
+    }
+
+    /// Every scene index from `from` on moved by `by` (a cloth removed before them, or
+    /// particles inserted): the particles', and every per-cloth record kept from its first
+    /// particle (grids, surfaces, tethers, collision layers) and the game's own triangles.
+    pub(super) fn renumber(&mut self, from: u32, by: i64) {
+        let moved = |i: &mut u32| {
+            if *i >= from {
+                *i = (*i as i64 + by) as u32;
             }
+        };
+        for i in self.world.query_mut::<&mut SceneIndex>() {
+            moved(&mut i.0);
+        }
+        for c in self.world.query_mut::<&mut ClothSprings>() {
+            moved(&mut c.grid.first);
         }
         for m in self
             .world
             .query_mut::<&mut crate::components::MeshSurface>()
         {
-            if m.first >= range.end {
-                m.first -= n;
-            }
+            moved(&mut m.first);
         }
-        if let Some(custom) = &mut self.frame.custom {
-            custom.retain(|t| !t.iter().any(|i| range.contains(i)));
-            for t in custom.iter_mut() {
-                for i in t.iter_mut() {
-                    if *i >= range.end {
-                        *i -= n;
-                    }
-                }
-            }
+        for t in self.world.query_mut::<&mut crate::Tethers>() {
+            moved(&mut t.first);
         }
-        self.frame.triangles.take();
-        self.frame.prev.clear();
-        self.dirty = true;
-        Ok(())
+        for l in self.world.query_mut::<&mut crate::collide::Layer>() {
+            moved(&mut l.first);
+        }
+        for t in self.frame.custom.iter_mut().flatten() {
+            t.iter_mut().for_each(moved);
+        }
     }
 
     /// Adds a rigid body, validated as a scene's would be (an error names the field, e.g.
