@@ -63,6 +63,15 @@ impl Drives {
         self.sets.is_empty()
     }
 
+    /// The particles the drives pinned (they were free before).
+    pub(super) fn pinned_here(&self) -> impl Iterator<Item = Entity> + '_ {
+        (self.sets.iter()).flat_map(|s| {
+            (s.entities.iter().zip(&s.pinned_here))
+                .filter(|(_, &p)| p)
+                .map(|(&e, _)| e)
+        })
+    }
+
     /// Every element's packed index again, after a gather (a cloth removed shifts them).
     pub(super) fn refresh(&mut self, packed: &Packed) {
         for set in &mut self.sets {

@@ -112,6 +112,32 @@ impl Simulation {
         Ok(id)
     }
 
+    /// The World's cloths and meshes (their [`ClothSprings`] or [`crate::MeshSurface`]) as
+    /// units, in scene order: a World built outside a scene has its cloths listed, removable
+    /// and named in [`Self::torn`] too.
+    pub(super) fn register_cloths(&mut self) {
+        let w = &self.world;
+        let grids = w
+            .query::<(Entity, &ClothSprings)>()
+            .iter()
+            .map(|(e, _)| e)
+            .collect::<Vec<_>>();
+        let meshes = w
+            .query::<(Entity, &crate::MeshSurface)>()
+            .iter()
+            .map(|(e, _)| e)
+            .collect::<Vec<_>>();
+        let mut found: Vec<(u32, Entity)> = (grids.into_iter().chain(meshes))
+            .filter_map(|e| Some((range_of(w, e)?.start, e)))
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        for (_, e) in found {
+            self.cloths.push((ClothId(self.next_cloth), e));
+            self.next_cloth += 1;
+        }
+    }
+
     /// The scene index after every particle's.
     fn next_index(&self) -> u32 {
         self.world

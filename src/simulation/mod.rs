@@ -112,6 +112,8 @@ pub struct Simulation {
     /// The tearable cloths' springs, and the last frame's breaks.
     tear: crate::tear::TearStage,
     torn: Vec<crate::Tear>,
+    /// The last frame's tear added particles: gathered before the step returns.
+    opened: bool,
     /// Whether the frame times its stages ([`Simulation::set_timers`]).
     timers: bool,
     /// The GPU step, when the backend resolved to the GPU.
@@ -261,6 +263,7 @@ impl Simulation {
             stretch: Default::default(),
             collide: Default::default(),
             tear: Default::default(),
+            opened: false,
             torn: Vec::new(),
             timers: true,
             #[cfg(feature = "gpu")]
@@ -274,6 +277,7 @@ impl Simulation {
         };
         #[cfg(not(feature = "gpu"))]
         refuse_gpu(&config)?;
+        sim.register_cloths();
         sim.gather()?;
         if let (true, Some(network)) = (config.auto_integrator, sim.network) {
             let (integrator, why) = step_control::choose_integrator(&network, config.dt);
@@ -307,6 +311,9 @@ impl Simulation {
         }
         let built = scene.build();
         let mut sim = Self::with_props(built.world, built.config, built.props)?;
+        // The scene's order of cloths and meshes.
+        sim.cloths.clear();
+        sim.next_cloth = 0;
         for e in built.cloths {
             sim.cloths.push((ClothId(sim.next_cloth), e));
             sim.next_cloth += 1;

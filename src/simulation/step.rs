@@ -251,6 +251,7 @@ impl Simulation {
             self.adapt(probed);
             self.schedule.set_substeps(self.config.substeps);
         }
+        self.gather_opened();
         Ok(&self.stats)
     }
 

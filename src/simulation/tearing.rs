@@ -11,7 +11,25 @@ impl Simulation {
             return;
         }
         let mut breaks = Vec::with_capacity(self.tear.broken.len());
-        self.tear.apply(&mut self.world, &self.packed, &mut breaks);
+        let openings = self.tear.apply(&mut self.world, &self.packed, &mut breaks);
+        // The particles the game holds (grabbed, or pinned by a drive): their copies go free.
+        let held: Vec<Entity> = (self.grabbed.iter().copied())
+            .chain(self.drives.pinned_here())
+            .collect();
+        // Last cloth first: each one's new particles go after its own, moving the later ones.
+        for o in openings.into_iter().rev() {
+            let (end, added) = (o.first + o.count, o.added());
+            if added > 0 {
+                self.opened = true;
+                self.renumber(end, added as i64);
+                for b in &mut breaks {
+                    if b.1 >= end {
+                        (b.1, b.2) = (b.1 + added, b.2 + added);
+                    }
+                }
+            }
+            o.carry_out(&mut self.world, &self.packed.topology.entities, &held);
+        }
         let step = self.steps - 1;
         for (e, a, b) in breaks {
             if let Some(&(cloth, _)) = self.cloths.iter().find(|c| c.1 == e) {
@@ -23,10 +41,26 @@ impl Simulation {
         // The next step gathers the new topology; the surfaces' triangles are made again.
         self.dirty = true;
         self.frame.triangles.take();
+        self.frame.prev.clear();
+    }
+
+    /// After a frame whose tear added particles: the buffers gathered at once, so what the
+    /// game reads before the next step (positions, triangles) agrees; the next frame's books
+    /// take `E` afresh, the change booked as edits. A failed gather is left to the next step.
+    pub(super) fn gather_opened(&mut self) {
+        if std::mem::take(&mut self.opened) {
+            match self.gather() {
+                Ok(()) => self.state_edited = true,
+                Err(_) => self.dirty = true,
+            }
+        }
     }
 
     /// The springs that broke in the last frame ([`crate::Tearing`]), in the springs' order:
-    /// each one's cloth and ends. Empty after a frame without a break.
+    /// each one's cloth and ends. Empty after a frame without a break. A frame that tears
+    /// may add particles where the surface opens (see [`crate::Tearing`]): they come
+    /// after their cloth's particles, later particles move up in scene order, and
+    /// [`Self::positions`] and [`Self::triangles`] have them when the step returns.
     pub fn torn(&self) -> &[crate::Tear] {
         &self.torn
     }

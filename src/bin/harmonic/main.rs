@@ -438,6 +438,7 @@ fn run(args: RunArgs) -> Result<(), String> {
     let t0 = Instant::now();
     let mut failure = None;
     let mut first_quarantine = None;
+    let (mut tears, particles, triangles) = (0usize, sim.positions().len(), sim.triangles().len());
     for step in 1..=steps {
         match sim.step() {
             Err(e) => {
@@ -450,6 +451,7 @@ fn run(args: RunArgs) -> Result<(), String> {
             Ok(_) => {}
         }
         bar.set(step, sim.time());
+        tears += sim.torn().len();
         times.add(sim.stats());
         substeps_run += sim.stats().substeps as u64;
         if let Some(p) = sim.props() {
@@ -488,6 +490,13 @@ fn run(args: RunArgs) -> Result<(), String> {
         let (pairs, found) = sim.collision_pairs();
         say!(
             "self-collision: {pairs} candidate pairs at the end; candidates found {found} times in {done} frame(s)"
+        );
+    }
+    if sim.schedule().has(StageKind::Tearing) {
+        say!(
+            "tearing: {tears} spring(s) broke; the surface opened at {} new particle(s), {} of {triangles} triangle(s) left",
+            sim.positions().len() - particles,
+            sim.triangles().len()
         );
     }
     if sim.props().is_some() {
