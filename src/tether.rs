@@ -5,10 +5,14 @@
 //!
 //! The rest distances are Euclidean, taken where the cloth is built (its rest shape): a lower
 //! bound of the geodesic one along the cloth, so a tether never holds a particle closer than
-//! the cloth itself would. After the spring step a particle further than its limit from an
-//! anchor is put back on that sphere, and its velocity away from the anchor, relative to the
-//! anchor's own, removed; the audit books the change of `E` the projections made
-//! ([`crate::EnergyAudit::limits`], with the stretch limits').
+//! the cloth itself would. After each substep's springs, a particle's velocity away from an
+//! anchor (relative to the anchor's own) is limited so that the next substep's move takes it
+//! at most to its limit, and one past it comes back: a change of kinetic energy only, booked
+//! without evaluating a spring. At a frame's last substep, a particle still past its limit
+//! (its springs pulled it outward harder than gravity: by `h²` times the difference) is first
+//! put back on that sphere and its velocity away from the anchor removed, so none ends a frame
+//! past it. The audit books the change of `E` both made ([`crate::EnergyAudit::limits`], with
+//! the stretch limits').
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -126,12 +130,14 @@ pub(crate) struct TetherStage {
     held: Vec<(DVec3, DVec3)>,
     /// `links[starts[k]..starts[k + 1]]`: block `k`'s links.
     starts: Vec<usize>,
-    /// What the substep's projections moved, and each block's change of `E` and whether it
-    /// moved any.
+    /// What the frame's last placing moved; each block's change of `E` from the clamps, and
+    /// from the placing with whether it moved any.
     moves: crate::audit::Moves,
-    sums: Vec<(f64, bool)>,
+    sums: Vec<f64>,
+    placed: Vec<(f64, bool)>,
     parallel: bool,
-    /// The change of `E` the projections made this frame (J, ≤ 0 but for rounding).
+    /// The change of `E` the tethers made this frame (J; mostly taken out, though a clamp
+    /// that brings a particle back from past its limit puts some in).
     pub(crate) energy: f64,
 }
 
@@ -171,7 +177,8 @@ impl TetherStage {
         self.starts
             .extend((0..=blocks).map(|k| links.partition_point(|l| (l.0 as usize) < k * BLOCK)));
         self.moves.reset(n);
-        self.sums.resize(blocks, (0.0, false));
+        self.sums.resize(blocks, 0.0);
+        self.placed.resize(blocks, (0.0, false));
         self.parallel = crate::integrate::runs_parallel(packed);
     }
 
@@ -179,12 +186,92 @@ impl TetherStage {
         self.links.is_empty()
     }
 
-    /// After a substep's springs: every particle further than its limit from an anchor put
-    /// back on the sphere, its velocity away from the anchor (relative to the anchor's) removed,
-    /// block by block (a tether moves its particle only, never an anchor); the change of the
-    /// particles' own energy booked. Returns whether any moved: the springs' change, from
-    /// [`Self::moves`], is then the caller's to add.
-    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
+    /// After a substep's springs (`h` long): each particle's velocity away from each of its
+    /// anchors (relative to the anchor's own) limited to what takes it, over the next
+    /// substep's move, at most to its limit (a particle past it comes back); at the frame's
+    /// `last` substep, first every particle past its limit put back on it ([`Self::place`]).
+    /// Returns whether any was put back: the springs' change, from [`Self::moves`], is then
+    /// the caller's to add.
+    pub(crate) fn project(
+        &mut self,
+        packed: &mut Packed,
+        gravity: DVec3,
+        h: f64,
+        last: bool,
+    ) -> bool {
+        let placed = last && self.place(packed, gravity);
+        self.clamp(packed, gravity, h);
+        placed
+    }
+
+    /// Each particle's velocity away from each of its anchors limited, block by block: a
+    /// tether changes its particle's velocity only, never an anchor's, and no position, so the
+    /// kinetic energy it takes is the whole change of `E` (booked in `energy`). The next
+    /// substep's move is taken as `h (v + h g)`: a particle whose springs pull it outward
+    /// harder than gravity ends it past its limit by `h²` times the difference, and the next
+    /// clamp brings it back.
+    fn clamp(&mut self, packed: &mut Packed, gravity: DVec3, h: f64) {
+        use rayon::prelude::*;
+        for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
+            *h = (packed.x[a as usize], packed.v[a as usize]);
+        }
+        let (links, starts, held) = (&self.links, &self.starts, &self.held);
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        let inv_h = 1.0 / h;
+        // The next substep moves a particle by `h (v + h a)`, `a` ≈ gravity: along
+        // `n = d/|d|` at most `L − |d|`, that is `s ≤ |d| L` with `s = h (u + h g)·d + |d|²`
+        // (`u` its velocity relative to the anchor's), tested without a root as
+        // `s |s| ≤ |d|² L²`.
+        let within = |l: &Link, vs: &[DVec3], base: usize| {
+            let (ya, wa) = held[l.1 as usize];
+            let d = x[l.0 as usize] - ya;
+            let d2 = d.length_squared();
+            let s = h * (vs[l.0 as usize - base] - wa + h * gravity).dot(d) + d2;
+            s * s.abs() <= d2 * l.2 * l.2
+        };
+        // Link by link in order: a particle's second anchor sees its first's clamp.
+        let pull = |k: usize, vs: &mut [DVec3]| {
+            let base = k * BLOCK;
+            let mut change = 0.0;
+            for l in &links[starts[k]..starts[k + 1]] {
+                let (i, (ya, wa), limit) = (l.0 as usize, held[l.1 as usize], l.2);
+                if within(l, vs, base) || inv[i] == 0.0 {
+                    continue;
+                }
+                let j = i - base;
+                let d = x[i] - ya;
+                let len = d.length();
+                if !(len > 0.0 && len.is_finite()) {
+                    continue;
+                }
+                let n = d * len.recip();
+                let most = (limit - len) * inv_h - h * gravity.dot(n);
+                let excess = (vs[j] - wa).dot(n) - most;
+                if excess > 0.0 {
+                    // ½ m (|v − e n|² − |v|²): the kinetic energy the clamp takes.
+                    change += 0.5 / inv[i] * excess * (excess - 2.0 * vs[j].dot(n));
+                    vs[j] -= excess * n;
+                }
+            }
+            change
+        };
+        let (v, sums) = (&mut packed.v, &mut self.sums);
+        if self.parallel {
+            (v.par_chunks_mut(BLOCK).zip(sums.par_iter_mut()))
+                .enumerate()
+                .for_each(|(k, (vs, s))| *s = pull(k, vs));
+        } else {
+            (v.chunks_mut(BLOCK).zip(sums.iter_mut()))
+                .enumerate()
+                .for_each(|(k, (vs, s))| *s = pull(k, vs));
+        }
+        self.energy += self.sums.iter().sum::<f64>();
+    }
+
+    /// Every particle further than its limit from an anchor put back on the sphere, its
+    /// velocity away from the anchor (relative to the anchor's) removed, block by block; the
+    /// change of the particles' own energy booked. Whether any moved.
+    fn place(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
         use rayon::prelude::*;
         for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
             *h = (packed.x[a as usize], packed.v[a as usize]);
@@ -222,7 +309,7 @@ impl TetherStage {
                 }
                 (change, any)
             };
-        let (x, v, sums) = (&mut packed.x, &mut packed.v, &mut self.sums);
+        let (x, v, sums) = (&mut packed.x, &mut packed.v, &mut self.placed);
         let (bs, ms) = (&mut self.moves.before, &mut self.moves.moved);
         if self.parallel {
             (x.par_chunks_mut(BLOCK).zip(v.par_chunks_mut(BLOCK)))
@@ -237,12 +324,11 @@ impl TetherStage {
                 .enumerate()
                 .for_each(|(k, (((xs, vs), (bs, ms)), s))| *s = pull(k, xs, vs, bs, ms));
         }
-        let own: f64 = self.sums.iter().map(|s| s.0).sum();
-        self.energy += own;
-        self.sums.iter().any(|s| s.1)
+        self.energy += self.placed.iter().map(|s| s.0).sum::<f64>();
+        self.placed.iter().any(|s| s.1)
     }
 
-    /// What the last projections moved.
+    /// What the last placing moved.
     pub(crate) fn moves(&self) -> &crate::audit::Moves {
         &self.moves
     }

@@ -262,7 +262,7 @@ impl Run<'_> {
             (StageKind::Tethers, _) => {
                 self.state_to_host()?;
                 if let Some(t) = self.tethers.as_mut() {
-                    if t.project(self.packed, self.gravity) {
+                    if t.project(self.packed, self.gravity, h, k + n == self.frame_substeps) {
                         t.energy += self.auditor.spring_change(self.packed, t.moves());
                     }
                 }
