@@ -280,7 +280,11 @@ impl Opening {
             let Ok(p) = world.get::<&Particle>(v).map(|p| *p) else {
                 continue;
             };
-            let pinned = world.get::<&Pin>(v).is_ok() && !held.contains(&v);
+            // A pin the game or the quarantine put on it (not the scene's) stays its own.
+            let quarantined = world
+                .get::<&crate::components::Quarantined>(v)
+                .is_ok_and(|q| !q.was_pinned);
+            let pinned = world.get::<&Pin>(v).is_ok() && !held.contains(&v) && !quarantined;
             let attached = world
                 .get::<&crate::contacts::Attachment>(v)
                 .map(|a| *a)
