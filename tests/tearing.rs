@@ -287,6 +287,56 @@ fn a_falling_ball_tears_the_sheet_the_same_on_1_and_2_threads() {
     assert_eq!(one.2, two.2);
 }
 
+/// Two torn sheets side by side, each under its own ball: the first one's new particles go
+/// after its own and move the second's up, so at every frame each sheet's particles (by its
+/// range) keep the sheet's mass, its triangles stay within its range, and each break names
+/// two particles of its own sheet that are far apart (past the tearing stretch of a cell).
+#[test]
+fn two_torn_sheets_keep_their_own_particles() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/torn_sheet.ron");
+    let mut scene = Scene::load(path).unwrap();
+    let mut second = scene.cloths[0].clone();
+    second.origin[0] += 1.5;
+    scene.cloths.push(second);
+    let mut ball = scene.bodies[0].clone();
+    ball.position[0] += 1.5;
+    scene.bodies.push(ball);
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    let mass_of = |sim: &Simulation, r: std::ops::Range<usize>| -> f64 {
+        let world = sim.world();
+        let mut q = world.query::<(&harmonic::SceneIndex, &Particle)>();
+        q.iter()
+            .filter(|(i, _)| r.contains(&(i.0 as usize)))
+            .map(|(_, p)| p.mass)
+            .sum()
+    };
+    let (mut tears, mut grown) = (0, [0usize; 2]);
+    for _ in 0..60 {
+        sim.step().unwrap();
+        let cloths: Vec<_> = sim.cloths().collect();
+        assert_eq!(cloths.len(), 2);
+        for (k, (_, r)) in cloths.iter().enumerate() {
+            let m = mass_of(&sim, r.clone());
+            assert!((m - 0.3).abs() < 1e-12, "sheet {k}: {m} kg in {r:?}");
+            grown[k] = r.len() - 1024;
+        }
+        let x = sim.positions();
+        for t in sim.torn() {
+            let r = &cloths.iter().find(|c| c.0 == t.cloth).unwrap().1;
+            assert!(r.contains(&t.a) && r.contains(&t.b), "{t:?} outside {r:?}");
+            // A structural or shear spring of a 1/31 m cell, broken past 1.4 of its length.
+            assert!(x[t.a].distance(x[t.b]) > 1.4 / 31.0, "{t:?}");
+            tears += 1;
+        }
+        let world = sim.world();
+        for s in world.query::<&harmonic::MeshSurface>().iter() {
+            assert!(s.triangles.iter().flatten().all(|&i| i < s.count));
+        }
+    }
+    println!("two sheets: {tears} breaks, {grown:?} particles added");
+    assert!(tears > 20 && grown[0] > 0 && grown[1] > 0, "both tear open");
+}
+
 /// The same on the GPU: its particles grow as the surface opens, and what holds on the CPU
 /// holds there.
 #[test]
