@@ -41,7 +41,10 @@ impl Simulation {
         // The next step gathers the new topology; the surfaces' triangles are made again.
         self.dirty = true;
         self.frame.triangles.take();
-        self.frame.prev.clear();
+        if self.opened {
+            // The last positions no longer line up with the particles.
+            self.frame.prev.clear();
+        }
     }
 
     /// After a frame whose tear added particles: the buffers gathered at once, so what the

@@ -221,6 +221,18 @@ mod tests {
         t
     }
 
+    /// Where the grid's vertex stands, the middle column's copies (9, 10, 11 after the tear
+    /// down it) with their originals.
+    fn place(v: u32) -> DVec3 {
+        let v = match v {
+            9 => 1,
+            10 => 4,
+            11 => 7,
+            v => v,
+        };
+        DVec3::new((v % 3) as f64, -((v / 3) as f64), 0.0)
+    }
+
     fn set(e: &[Edge]) -> HashSet<Edge> {
         e.iter().copied().collect()
     }
@@ -288,22 +300,14 @@ mod tests {
         let mut t = grid();
         let fans = split(&mut t, &set(&[(1, 4), (4, 7)]), &[1, 4, 7].into(), 9);
         let fan_of = |v: u32| fans.iter().position(|f| f.vertex() == v);
-        let x = |v: u32| {
-            let v = match v {
-                9 => 1,
-                10 => 4,
-                11 => 7,
-                v => v,
-            };
-            DVec3::new((v % 3) as f64, -((v / 3) as f64), 0.0)
-        };
+        let x = place;
         let ends = |a, b| ends(&t, &fan_of, &fans, (a, b), &x);
         // Structural springs along edges go with their triangles' copies.
         let (l, r) = (ends(3, 4), ends(4, 5));
         assert!(l.0 == 3 && r.1 == 5, "{l:?} {r:?}");
         assert_ne!(l.1, r.0, "the two sides hold different copies of 4");
-        // A bend spring 3–5 across the tear has no split end; one from 4 to 0 (no edge of
-        // the grid's triangles there? 0–4 is a diagonal edge) follows its triangle.
+        // A bend spring 3–5 across the tear has no split end; 0–4, a diagonal edge, follows
+        // its triangle.
         assert_eq!(ends(3, 5), (3, 5));
         let d = ends(0, 4);
         assert!(t.iter().any(|t| t.contains(&d.0) && t.contains(&d.1)));
@@ -315,15 +319,7 @@ mod tests {
     fn mass_shares_follow_the_pieces_areas() {
         let mut t = grid();
         let fans = split(&mut t, &set(&[(1, 4), (4, 7)]), &[1, 4, 7].into(), 9);
-        let x = |v: u32| {
-            let v = match v {
-                9 => 1,
-                10 => 4,
-                11 => 7,
-                v => v,
-            };
-            DVec3::new((v % 3) as f64, -((v / 3) as f64), 0.0)
-        };
+        let x = place;
         let centre = &fans[1];
         let s = shares(&t, centre, &x);
         assert_eq!(s.len(), 2);
