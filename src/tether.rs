@@ -204,6 +204,13 @@ impl TetherStage {
         placed
     }
 
+    /// The anchors' states now: a tether changes its particle only, so the blocks read them.
+    fn hold(&mut self, packed: &Packed) {
+        for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
+            *h = (packed.x[a as usize], packed.v[a as usize]);
+        }
+    }
+
     /// Each particle's velocity away from each of its anchors limited, block by block: a
     /// tether changes its particle's velocity only, never an anchor's, and no position, so the
     /// kinetic energy it takes is the whole change of `E` (booked in `energy`). The next
@@ -212,9 +219,7 @@ impl TetherStage {
     /// clamp brings it back.
     fn clamp(&mut self, packed: &mut Packed, gravity: DVec3, h: f64) {
         use rayon::prelude::*;
-        for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
-            *h = (packed.x[a as usize], packed.v[a as usize]);
-        }
+        self.hold(packed);
         let (links, starts, held) = (&self.links, &self.starts, &self.held);
         let (x, inv) = (&packed.x, &packed.inv_mass);
         let inv_h = 1.0 / h;
@@ -273,9 +278,7 @@ impl TetherStage {
     /// change of the particles' own energy booked. Whether any moved.
     fn place(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
         use rayon::prelude::*;
-        for (h, &a) in self.held.iter_mut().zip(&self.anchors) {
-            *h = (packed.x[a as usize], packed.v[a as usize]);
-        }
+        self.hold(packed);
         let n = self.moves.moved.len();
         self.moves.reset(n);
         let (links, starts, held) = (&self.links, &self.starts, &self.held);
