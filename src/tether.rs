@@ -13,6 +13,10 @@
 //! put back on that sphere and its velocity away from the anchor removed, so none ends a frame
 //! past it. The audit books the change of `E` both made ([`crate::EnergyAudit::limits`], with
 //! the stretch limits').
+//!
+//! With the springs on the GPU the clamp has a twin on the device (`shaders/tethers.wgsl`,
+//! `gpu::tethers`) after every substep but the frame's last; that one's placing and clamp run
+//! here, where the state comes back at a frame's end, so a tethered cloth's frame is one submit.
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -186,6 +190,13 @@ impl TetherStage {
         self.links.is_empty()
     }
 
+    #[cfg(feature = "gpu")]
+    /// `(particle, anchor, limit)` in packed indices, by particle (each particle's anchors in
+    /// the order the clamp takes them).
+    pub(crate) fn links(&self) -> impl Iterator<Item = Link> + '_ {
+        (self.links.iter()).map(|&(i, slot, limit)| (i, self.anchors[slot as usize], limit))
+    }
+
     /// After a substep's springs (`h` long): each particle's velocity away from each of its
     /// anchors (relative to the anchor's own) limited to what takes it, over the next
     /// substep's move, at most to its limit (a particle past it comes back); at the frame's
@@ -202,6 +213,20 @@ impl TetherStage {
         let placed = last && self.place(packed, gravity);
         self.clamp(packed, gravity, h);
         placed
+    }
+
+    #[cfg(feature = "gpu")]
+    /// The frame's last substep where the device ran the clamps of the others (`device`: the
+    /// change of `E` they made): as [`Self::project`] at the `last` substep.
+    pub(crate) fn finish_device(
+        &mut self,
+        packed: &mut Packed,
+        gravity: DVec3,
+        h: f64,
+        device: f64,
+    ) -> bool {
+        self.energy += device;
+        self.project(packed, gravity, h, true)
     }
 
     /// The anchors' states now: a tether changes its particle only, so the blocks read them.

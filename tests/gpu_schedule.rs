@@ -17,8 +17,9 @@ fn context() -> Option<Arc<GpuContext>> {
 }
 
 /// Submits per frame, as the schedule asks: all of a frame's substeps in one where no stage
-/// needs the host between them; one per substep where the contacts run on the CPU (the cape's
-/// attachments) or the device's contacts push a dynamic body (the trampoline's ball).
+/// needs the host between them (the tethered cloth's clamp runs on the device too); one per
+/// substep where the contacts run on the CPU (the cape's attachments) or the device's contacts
+/// push a dynamic body (the trampoline's ball).
 #[test]
 fn each_frame_submits_what_its_schedule_asks() {
     let Some(_ctx) = context() else { return };
@@ -29,6 +30,7 @@ fn each_frame_submits_what_its_schedule_asks() {
         ("drape_sphere.ron", Some(Backend::Gpu), false),
         ("trampoline.ron", Some(Backend::Gpu), true),
         ("cape.ron", Some(Backend::Cpu), true),
+        ("tethered_cloth.ron", None, false),
     ];
     for (name, contacts_on, per_substep) in cases {
         let built = Scene::load(root.join(name))
@@ -138,11 +140,13 @@ fn forces_on_the_gpu_are_gravity_where_uniform_and_the_cpu_where_not() {
 fn the_device_times_each_stage_where_it_has_timestamps() {
     let Some(ctx) = context() else { return };
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    for (name, device_contacts) in [
-        ("hanging_cloth.ron", false),
-        ("drape_sphere.ron", true),
-        ("trampoline.ron", true),
-        ("cape.ron", false),
+    // (scene, contacts on the device, tethers on the device)
+    for (name, device_contacts, device_tethers) in [
+        ("hanging_cloth.ron", false, false),
+        ("drape_sphere.ron", true, false),
+        ("trampoline.ron", true, false),
+        ("cape.ron", false, false),
+        ("tethered_cloth.ron", false, true),
     ] {
         let built = Scene::load(root.join(name)).unwrap().build();
         let config = SimConfig {
@@ -161,12 +165,14 @@ fn the_device_times_each_stage_where_it_has_timestamps() {
             assert!(clock);
             let integrate = kernels[StageKind::Integrate];
             let contacts = kernels[StageKind::Contacts];
+            let tethers = kernels[StageKind::Tethers];
             println!(
-                "{name}: integrate {integrate:?}, contacts {contacts:?} of {:?}",
+                "{name}: integrate {integrate:?}, contacts {contacts:?}, tethers {tethers:?} of {:?}",
                 stats.total()
             );
             assert!(!integrate.is_zero(), "{name}: {kernels:?}");
             assert_eq!(!contacts.is_zero(), device_contacts, "{name}: {kernels:?}");
+            assert_eq!(!tethers.is_zero(), device_tethers, "{name}: {kernels:?}");
             assert!(
                 kernels.total() <= stats.total(),
                 "{name}: {kernels:?} in {stats:?}"

@@ -21,7 +21,7 @@ fn shader_files() -> Vec<PathBuf> {
 }
 
 /// The step's shaders, which the prelude goes before.
-const STEP_SHADERS: [&str; 2] = ["integrate.wgsl", "contacts.wgsl"];
+const STEP_SHADERS: [&str; 3] = ["integrate.wgsl", "contacts.wgsl", "tethers.wgsl"];
 
 /// A shader file as the engine assembles it: the prelude first for a step shader.
 fn assembled(name: &str) -> String {
@@ -57,13 +57,14 @@ fn every_shader_parses_and_validates() {
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         checked += 1;
     }
-    assert_eq!(checked, 3, "integrate, contacts and render");
+    assert_eq!(checked, 4, "integrate, contacts, render and tethers");
 }
 
 #[test]
 fn the_embedded_shaders_are_the_prelude_and_the_files() {
     assert_eq!(gpu::SHADER, assembled("integrate.wgsl"));
     assert_eq!(gpu::contacts::SHADER, assembled("contacts.wgsl"));
+    assert_eq!(gpu::tethers::SHADER, assembled("tethers.wgsl"));
     assert!(gpu::SHADER.starts_with(gpu::PRELUDE));
     // One definition: no step shader declares what the prelude does.
     for name in STEP_SHADERS {
@@ -177,6 +178,28 @@ fn pod_mirrors_match_the_wgsl_layouts() {
             }
         );
     }
+    let tether_module = parse("tethers.wgsl");
+    check_layout!(
+        &tether_module,
+        [tethers] TetherStep {
+            gravity,
+            h,
+            parts,
+            _pad0,
+            _pad1,
+            _pad2
+        }
+    );
+    check_layout!(
+        &tether_module,
+        [tethers] Part {
+            particle,
+            first,
+            count,
+            _pad
+        }
+    );
+    check_layout!(&tether_module, [tethers] Link { anchor, limit });
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides

@@ -224,3 +224,48 @@ fn a_grid_books_its_tethers_as_its_springs_one_by_one() {
     assert!(rel < 1e-9, "{} against {}", grid.limits, loose.limits);
     assert!((grid.residual - loose.residual).abs() < 1e-9 * grid.limits);
 }
+
+/// The device's clamp is the CPU's (`shaders/tethers.wgsl`, the twin of `TetherStage::clamp`):
+/// the soft cloth, held by two anchors against its slack every substep, steps alike on both
+/// back ends, each frame one submit with the tethers on the device; the same cloth on the
+/// device without them ends far from both.
+#[cfg(feature = "gpu")]
+#[test]
+fn the_device_clamps_as_the_cpu_does() {
+    if common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)).is_none() {
+        return;
+    }
+    let tethers = ", tethers: Some((slack: 0.05, anchors: 2))";
+    let mut cpu = Simulation::from_scene(&soft_cloth(tethers, "cpu")).unwrap();
+    let mut gpu = Simulation::from_scene(&soft_cloth(tethers, "gpu")).unwrap();
+    let mut free = Simulation::from_scene(&soft_cloth("", "gpu")).unwrap();
+    let on = (gpu.schedule().stages().iter())
+        .find(|s| s.kind == StageKind::Tethers)
+        .map(|s| s.on);
+    assert_eq!(on, Some(harmonic::Backend::Gpu), "{}", gpu.schedule());
+    let mut apart: f64 = 0.0;
+    for frame in 0..60 {
+        cpu.step().unwrap();
+        let before = gpu.gpu_solver().unwrap().submits();
+        gpu.step().unwrap();
+        let made = gpu.gpu_solver().unwrap().submits() - before;
+        assert_eq!(made, 1, "frame {frame}: {}", gpu.schedule());
+        free.step().unwrap();
+        let d = (cpu.positions().iter().zip(gpu.positions()))
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, f64::max);
+        apart = apart.max(d);
+    }
+    let untethered = (cpu.positions().iter().zip(free.positions()))
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0, f64::max);
+    let (c, g) = (cpu.diagnostics().audit, gpu.diagnostics().audit);
+    println!(
+        "CPU and device {apart:.2e} m apart at most; untethered {untethered:.2e} m; \
+         limits {:.6e} J on the CPU, {:.6e} J on the device",
+        c.limits, g.limits
+    );
+    assert!(untethered > 0.1, "the tethers hold the cloth: {untethered}");
+    assert!(apart < 3e-5, "{apart} m");
+    assert!((c.limits - g.limits).abs() < 1e-4 * c.limits);
+}

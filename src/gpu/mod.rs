@@ -42,6 +42,7 @@ pub use solver::*;
 use upload::*;
 
 pub mod contacts;
+pub mod tethers;
 
 /// What the step's shaders share (`WORKGROUP`, `Position`, `linear`), joined before each.
 pub const PRELUDE: &str = include_str!("../../shaders/prelude.wgsl");

@@ -24,6 +24,8 @@ pub struct GpuSolver {
     pub(super) h: f32,
     /// The contact stage on the device, when the scene's colliders allow it.
     pub(super) contacts: Option<contacts::DeviceContacts>,
+    /// The tethers' clamp on the device, when the scene's cloths have tethers.
+    pub(super) tethers: Option<tethers::DeviceTethers>,
     /// Step submits so far ([`Self::submits`]).
     pub(super) submits: u64,
     /// Host scratch for the external accelerations ([`Self::set_accel`]).
@@ -98,6 +100,7 @@ impl GpuSolver {
             host_vel: Vec::new(),
             h: f32::NAN,
             contacts: None,
+            tethers: None,
             submits: 0,
             host_accel: Vec::new(),
             clock,
@@ -137,6 +140,9 @@ impl GpuSolver {
         q.write_buffer(&b.coefs, 0, bytemuck::cast_slice(&self.host_coefs));
         // h is the 4th f32 of Params.
         q.write_buffer(&b.params, 12, bytemuck::bytes_of(&(h as f32)));
+        if let Some(t) = &mut self.tethers {
+            t.set_h(q, h);
+        }
         self.h = h as f32;
         Ok(())
     }
@@ -151,6 +157,40 @@ impl GpuSolver {
             &self.ctx, &b.pos, &b.vel, setup,
         )?);
         Ok(())
+    }
+
+    /// Puts the tethers' clamp on the device over the state uploaded last (call after each
+    /// upload): every substep's springs are then followed by the tethers' pass.
+    pub fn enable_tethers(&mut self, setup: &tethers::TetherSetup<'_>) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        self.tethers = Some(tethers::DeviceTethers::new(
+            &self.ctx, &b.pos, &b.vel, setup,
+        )?);
+        Ok(())
+    }
+
+    /// The device clamps after the springs of a frame's slots `0..slots` only (the host takes
+    /// the last: it places the particles past their limits first).
+    pub fn set_tether_slots(&mut self, slots: u32) {
+        if let Some(t) = &mut self.tethers {
+            t.slots = slots;
+        }
+    }
+
+    /// Whether the tethers' clamp runs on the device.
+    pub fn has_tethers(&self) -> bool {
+        self.tethers.is_some()
+    }
+
+    /// Waits for the queued work; the change of energy the device's tether clamps made since
+    /// the last call (J; 0 without them).
+    pub fn take_tether_change(&mut self) -> Result<f64, GpuError> {
+        match &mut self.tethers {
+            Some(t) => t.take_change(&self.ctx),
+            None => Ok(0.0),
+        }
     }
 
     /// The frame's external accelerations (packed order, gravity included) for a solver
@@ -240,10 +280,12 @@ impl GpuSolver {
         if let Some(c) = contacts {
             c.flush(&self.ctx.queue);
         }
+        let tethers = self.tethers.as_ref();
         let kernel = self.kernel;
         let ctx = &self.ctx;
         // A submit's start, then the end of each stage of each substep.
-        let per_substep = 1 + u32::from(contacts.is_some());
+        let per_substep = 1 + u32::from(contacts.is_some()) + u32::from(tethers.is_some());
+
         let mut clock = self.clock.as_mut();
         if !clock
             .as_deref_mut()
@@ -299,6 +341,12 @@ impl GpuSolver {
                     }
                     if let Some(c) = clock.as_deref_mut() {
                         c.mark(&mut pass, Some(StageKind::Integrate));
+                    }
+                    if let Some(t) = tethers.filter(|t| first + s < t.slots) {
+                        t.encode(&mut pass);
+                        if let Some(c) = clock.as_deref_mut() {
+                            c.mark(&mut pass, Some(StageKind::Tethers));
+                        }
                     }
                     if let Some(c) = contacts {
                         c.encode(&mut pass, first + s);

@@ -149,6 +149,7 @@ impl GpuSolver {
         integrator: Integrator,
     ) -> Result<(), GpuError> {
         self.contacts = None;
+        self.tethers = None;
         if !packed.topology.grids.is_empty() && !integrator.runs_on_gpu_grids() {
             return Err(GpuError::Device {
                 adapter: self.ctx.describe(),

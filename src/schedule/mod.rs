@@ -221,8 +221,8 @@ pub(crate) struct Needs {
     pub(crate) drives: bool,
     /// Cloths feel air.
     pub(crate) air: bool,
-    /// Cloths have tethers.
-    pub(crate) tethers: bool,
+    /// Cloths have tethers: where their clamp runs.
+    pub(crate) tethers: Option<Backend>,
     /// Cloths have stretch limits.
     pub(crate) stretch: bool,
     /// Cloths tear.
@@ -261,8 +261,8 @@ impl Schedule {
         if n.drives {
             push(StageKind::Drive, Backend::Cpu);
         }
-        if n.tethers {
-            push(StageKind::Tethers, Backend::Cpu);
+        if let Some(on) = n.tethers {
+            push(StageKind::Tethers, on);
         }
         if n.stretch {
             push(StageKind::StretchLimit, Backend::Cpu);
@@ -331,7 +331,9 @@ impl fmt::Display for Schedule {
                         if n == 1 { "" } else { "s" }
                     )?;
                 }
-                (StageKind::Contacts, _) if gpu => f.write_str(" (on the GPU)")?,
+                (StageKind::Contacts | StageKind::Tethers, _) if gpu => {
+                    f.write_str(" (on the GPU)")?
+                }
                 _ => {}
             }
         }

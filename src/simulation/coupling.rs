@@ -74,6 +74,42 @@ impl Simulation {
         Ok(())
     }
 
+    /// With the springs on the GPU, the tethers' clamp runs there too (their frame-end
+    /// placing on the host, where the state comes back).
+    #[cfg(feature = "gpu")]
+    pub(super) fn device_tethers(&mut self) -> Result<(), SimError> {
+        use crate::gpu::tethers::{Link, Part, TetherSetup};
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
+        if self.tethers.is_empty() {
+            return Ok(());
+        }
+        let (mut parts, mut links) = (Vec::<Part>::new(), Vec::new());
+        for (i, anchor, limit) in self.tethers.links() {
+            match parts.last_mut() {
+                Some(p) if p.particle == i => p.count += 1,
+                _ => parts.push(Part {
+                    particle: i,
+                    first: links.len() as u32,
+                    count: 1,
+                    _pad: 0,
+                }),
+            }
+            links.push(Link {
+                anchor,
+                limit: limit as f32,
+            });
+        }
+        gpu.enable_tethers(&TetherSetup {
+            parts: &parts,
+            links: &links,
+            gravity: self.config.gravity,
+            h: self.config.h(),
+        })?;
+        Ok(())
+    }
+
     /// Whether the contact stage runs on the GPU.
     pub fn contacts_on_gpu(&mut self) -> bool {
         #[cfg(feature = "gpu")]

@@ -378,6 +378,8 @@ impl Simulation {
         }
         #[cfg(feature = "gpu")]
         self.device_contacts()?;
+        #[cfg(feature = "gpu")]
+        self.device_tethers()?;
         self.build_schedule(self.user_stage.is_some());
         Ok(())
     }
@@ -508,6 +510,10 @@ impl Simulation {
         let device_contacts = self.gpu.as_ref().is_some_and(|g| g.has_contacts());
         #[cfg(not(feature = "gpu"))]
         let device_contacts = false;
+        #[cfg(feature = "gpu")]
+        let device_tethers = self.gpu.as_ref().is_some_and(|g| g.has_tethers());
+        #[cfg(not(feature = "gpu"))]
+        let device_tethers = false;
         let contacts_on = match (&self.props, coupled) {
             (Some(_), _) if device_contacts => Some(Backend::Gpu),
             (Some(_), _) | (None, true) => Some(Backend::Cpu),
@@ -517,7 +523,11 @@ impl Simulation {
             gravity: self.config.gravity != DVec3::ZERO,
             forces: self.forces.as_ref().is_some_and(|f| f.game()),
             air: !self.air.is_empty(),
-            tethers: !self.tethers.is_empty(),
+            tethers: (!self.tethers.is_empty()).then_some(if device_tethers {
+                Backend::Gpu
+            } else {
+                Backend::Cpu
+            }),
             stretch: !self.stretch.is_empty(),
             collide: !self.collide.is_empty(),
             tearing: !self.tear.is_empty(),

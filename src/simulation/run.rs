@@ -182,6 +182,10 @@ impl Run<'_> {
     fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
         if let (StageKind::Tethers, 0, Some(t)) = (stage.kind, k, self.tethers.as_mut()) {
             t.energy = 0.0;
+            #[cfg(feature = "gpu")]
+            if let Some(d) = self.device.as_mut() {
+                d.gpu.set_tether_slots(self.frame_substeps - 1);
+            }
         }
         if let (StageKind::StretchLimit, 0, Some(s)) = (stage.kind, k, self.stretch.as_mut()) {
             s.energy = 0.0;
@@ -258,6 +262,12 @@ impl Run<'_> {
                 }
                 self.host_moved();
                 self.charge(StageKind::Drive);
+            }
+            // The device clamps each substep; the frame's last placing runs here.
+            (StageKind::Tethers, Backend::Gpu) => {
+                if k + n == self.frame_substeps {
+                    self.device_tethers_end(h)?;
+                }
             }
             (StageKind::Tethers, _) => {
                 self.state_to_host()?;
@@ -410,6 +420,31 @@ impl Run<'_> {
 
     #[cfg(not(feature = "gpu"))]
     fn device_contacts(&mut self, _: u32, _: u32) -> Result<(), SimError> {
+        Ok(())
+    }
+
+    /// The frame's end of the device's tethers: the state and the clamps' change of energy
+    /// come back, and every particle past its limit is put back on it here.
+    #[cfg(feature = "gpu")]
+    fn device_tethers_end(&mut self, h: f64) -> Result<(), SimError> {
+        self.state_to_host()?;
+        let change = match self.device.as_mut() {
+            Some(d) => d.gpu.take_tether_change()?,
+            None => 0.0,
+        };
+        self.charge_device();
+        if let Some(t) = self.tethers.as_mut() {
+            if t.finish_device(self.packed, self.gravity, h, change) {
+                t.energy += self.auditor.spring_change(self.packed, t.moves());
+            }
+        }
+        self.host_moved();
+        self.charge(StageKind::Tethers);
+        Ok(())
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    fn device_tethers_end(&mut self, _: f64) -> Result<(), SimError> {
         Ok(())
     }
 }

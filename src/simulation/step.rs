@@ -489,6 +489,8 @@ impl Simulation {
         }
         #[cfg(feature = "gpu")]
         self.device_contacts()?;
+        #[cfg(feature = "gpu")]
+        self.device_tethers()?;
         self.build_schedule(self.user_stage.is_some());
         self.dirty = false;
         Ok(())
