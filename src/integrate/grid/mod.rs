@@ -173,7 +173,7 @@ fn nominal_inv_mass(g: &PackedGrid, inv_mass: &[f64]) -> f64 {
 /// The vector unit the band is compiled for. Every level gives the same bits (no fused
 /// multiply-add, each lane in scalar order); `tests` hold them to it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-enum Vector {
+pub(crate) enum Vector {
     #[default]
     Portable,
     #[cfg(target_arch = "x86_64")]
@@ -184,7 +184,7 @@ enum Vector {
 
 impl Vector {
     /// Every level this CPU runs, narrowest first.
-    fn available() -> Vec<Self> {
+    pub(crate) fn available() -> Vec<Self> {
         #[allow(unused_mut)]
         let mut v = vec![Self::Portable];
         #[cfg(target_arch = "x86_64")]
@@ -201,7 +201,7 @@ impl Vector {
 
     /// The widest this CPU runs, or the level `HARMONIC_SIMD` names (`portable`, `avx2`,
     /// `avx512`) when the CPU runs it: to measure what each level buys. Decided once.
-    fn chosen() -> Self {
+    pub(crate) fn chosen() -> Self {
         static CHOSEN: std::sync::OnceLock<Vector> = std::sync::OnceLock::new();
         *CHOSEN.get_or_init(Self::decide)
     }
@@ -218,7 +218,7 @@ impl Vector {
         levels.pop().unwrap_or_default()
     }
 
-    fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Portable => "portable",
             #[cfg(target_arch = "x86_64")]

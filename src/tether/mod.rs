@@ -24,6 +24,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::buffers::Packed;
 use crate::components::{Particle, Pin, SceneIndex};
+use crate::integrate::grid::Vector;
+
+mod lanes;
+
+use lanes::{clamp_one, Lanes, Rank, Substep, Taken, LANES, MAX_RANKS, MIXED, NONE};
 
 /// A cloth's tethers, as a scene gives them (`tethers: Some((slack: 0.1, anchors: 1))`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -134,6 +139,12 @@ pub(crate) struct TetherStage {
     held: Vec<(DVec3, DVec3)>,
     /// `links[starts[k]..starts[k + 1]]`: block `k`'s links.
     starts: Vec<usize>,
+    /// The links again by rank, for the lanes: `ranked[r]` holds, per particle (packed
+    /// index), its `r`-th anchor's slot ([`NONE`] where it has fewer) and limit, and per
+    /// eight particles ([`LANES`]) which of them have such a link and the one anchor they
+    /// share ([`MIXED`] where they do not).
+    ranked: Vec<Rank>,
+    vector: Vector,
     /// What the frame's last placing moved; each block's change of `E` from the clamps, and
     /// from the placing with whether it moved any.
     moves: crate::audit::Moves,
@@ -180,6 +191,40 @@ impl TetherStage {
         let links = &self.links;
         self.starts
             .extend((0..=blocks).map(|k| links.partition_point(|l| (l.0 as usize) < k * BLOCK)));
+        for r in &mut self.ranked {
+            r.slots.clear();
+            r.limits.clear();
+        }
+        let mut from = 0;
+        while from < self.links.len() {
+            let i = self.links[from].0;
+            let to = from + self.links[from..].partition_point(|l| l.0 == i);
+            if self.ranked.len() < to - from {
+                self.ranked.resize(to - from, Default::default());
+            }
+            for (r, l) in self.links[from..to].iter().enumerate() {
+                let Rank { slots, limits, .. } = &mut self.ranked[r];
+                slots.resize(n, NONE);
+                limits.resize(n, 0.0);
+                (slots[i as usize], limits[i as usize]) = (l.1, l.2);
+            }
+            from = to;
+        }
+        self.ranked.retain(|r| !r.slots.is_empty());
+        // A particle of two cloths' tethers (it cannot be: a cloth's tethers are its own)
+        // would have more; its links past the fourth are not taken.
+        self.ranked.truncate(MAX_RANKS);
+        for r in &mut self.ranked {
+            r.lanes.clear();
+            (r.lanes).extend(r.slots.chunks(LANES).map(|s| {
+                let linked =
+                    (s.iter().enumerate()).fold(0u8, |m, (j, &q)| m | (u8::from(q != NONE) << j));
+                let one = s.iter().find(|&&q| q != NONE).copied().unwrap_or(NONE);
+                let shared = s.len() == LANES && s.iter().all(|&q| q == one || q == NONE);
+                (if shared { one } else { MIXED }, linked)
+            }));
+        }
+        self.vector = Vector::chosen();
         self.moves.reset(n);
         self.sums.resize(blocks, 0.0);
         self.placed.resize(blocks, (0.0, false));
@@ -245,42 +290,66 @@ impl TetherStage {
     fn clamp(&mut self, packed: &mut Packed, gravity: DVec3, h: f64) {
         use rayon::prelude::*;
         self.hold(packed);
-        let (links, starts, held) = (&self.links, &self.starts, &self.held);
+        let (ranked, held, vector) = (&self.ranked, &self.held, self.vector);
         let (x, inv) = (&packed.x, &packed.inv_mass);
-        let inv_h = 1.0 / h;
-        // The next substep moves a particle by `h (v + h a)`, `a` ≈ gravity: along
-        // `n = d/|d|` at most `L − |d|`, that is `s ≤ |d| L` with `s = h (u + h g)·d + |d|²`
-        // (`u` its velocity relative to the anchor's), tested without a root as
-        // `s |s| ≤ |d|² L²`.
-        let within = |l: &Link, vs: &[DVec3], base: usize| {
-            let (ya, wa) = held[l.1 as usize];
-            let d = x[l.0 as usize] - ya;
-            let d2 = d.length_squared();
-            let s = h * (vs[l.0 as usize - base] - wa + h * gravity).dot(d) + d2;
-            s * s.abs() <= d2 * l.2 * l.2
+        let at = Substep {
+            ya: DVec3::ZERO,
+            wa: DVec3::ZERO,
+            gravity,
+            hg: h * gravity,
+            h,
+            inv_h: 1.0 / h,
         };
-        // Link by link in order: a particle's second anchor sees its first's clamp.
+        // Eight particles at a time, rank by rank (a particle's second anchor sees its first's
+        // clamp): where the eight share one anchor their links run side by side, otherwise
+        // (and without AVX-512) one by one; the same bits either way.
+        // The energy is added particle by particle, each particle's anchors in order.
         let pull = |k: usize, vs: &mut [DVec3]| {
             let base = k * BLOCK;
             let mut change = 0.0;
-            for l in &links[starts[k]..starts[k + 1]] {
-                let (i, (ya, wa), limit) = (l.0 as usize, held[l.1 as usize], l.2);
-                if within(l, vs, base) || inv[i] == 0.0 {
-                    continue;
+            for c in (0..vs.len()).step_by(LANES) {
+                let g = (base + c) / LANES;
+                let m = LANES.min(vs.len() - c);
+                let mut taken: [Taken; MAX_RANKS] = [([0.0; LANES], 0); MAX_RANKS];
+                for (r, t) in ranked.iter().zip(&mut taken) {
+                    let (q, linked) = r.lanes[g];
+                    if linked == 0 {
+                        continue;
+                    }
+                    let (l, v) = (&r.limits[base + c..], &mut vs[c..c + m]);
+                    if q != MIXED {
+                        let (ya, wa) = held[q as usize];
+                        let mut lanes = Lanes {
+                            x: &x[base + c..base + c + m],
+                            v,
+                            inv: &inv[base + c..base + c + m],
+                            limits: &l[..m],
+                            linked,
+                        };
+                        if lanes.clamp(vector, &Substep { ya, wa, ..at }, t) {
+                            continue;
+                        }
+                    }
+                    let mut each = linked;
+                    while each != 0 {
+                        let j = each.trailing_zeros() as usize;
+                        each &= each - 1;
+                        let (i, slot) = (base + c + j, r.slots[base + c + j]);
+                        let (ya, wa) = held[slot as usize];
+                        let s = Substep { ya, wa, ..at };
+                        if let Some(e) = clamp_one(x[i], &mut vs[c + j], inv[i], l[j], &s) {
+                            (t.0[j], t.1) = (e, t.1 | 1 << j);
+                        }
+                    }
                 }
-                let j = i - base;
-                let d = x[i] - ya;
-                let len = d.length();
-                if !(len > 0.0 && len.is_finite()) {
-                    continue;
-                }
-                let n = d * len.recip();
-                let most = (limit - len) * inv_h - h * gravity.dot(n);
-                let excess = (vs[j] - wa).dot(n) - most;
-                if excess > 0.0 {
-                    // ½ m (|v − e n|² − |v|²): the kinetic energy the clamp takes.
-                    change += 0.5 / inv[i] * excess * (excess - 2.0 * vs[j].dot(n));
-                    vs[j] -= excess * n;
+                if taken.iter().any(|t| t.1 != 0) {
+                    for j in 0..m {
+                        for t in &taken[..ranked.len()] {
+                            if t.1 & 1 << j != 0 {
+                                change += t.0[j];
+                            }
+                        }
+                    }
                 }
             }
             change
