@@ -304,13 +304,29 @@ impl TetherStage {
         // clamp): where the eight share one anchor their links run side by side, otherwise
         // (and without AVX-512) one by one; the same bits either way.
         // The energy is added particle by particle, each particle's anchors in order.
+        let (links, starts) = (&self.links, &self.starts);
         let pull = |k: usize, vs: &mut [DVec3]| {
             let base = k * BLOCK;
             let mut change = 0.0;
+            if !vector.lanes_of_8() {
+                // Link by link, in the same order.
+                for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
+                    let (i, (ya, wa)) = (i as usize, held[slot as usize]);
+                    let s = Substep { ya, wa, ..at };
+                    if let Some(e) = clamp_one(x[i], &mut vs[i - base], inv[i], limit, &s) {
+                        change += e;
+                    }
+                }
+                return change;
+            }
+            // Each rank's energies per lane (read only where its lane's bit is set).
+            let mut taken: [Taken; MAX_RANKS] = [([0.0; LANES], 0); MAX_RANKS];
             for c in (0..vs.len()).step_by(LANES) {
                 let g = (base + c) / LANES;
                 let m = LANES.min(vs.len() - c);
-                let mut taken: [Taken; MAX_RANKS] = [([0.0; LANES], 0); MAX_RANKS];
+                for t in &mut taken {
+                    t.1 = 0;
+                }
                 for (r, t) in ranked.iter().zip(&mut taken) {
                     let (q, linked) = r.lanes[g];
                     if linked == 0 {
@@ -342,12 +358,14 @@ impl TetherStage {
                         }
                     }
                 }
-                if taken.iter().any(|t| t.1 != 0) {
-                    for j in 0..m {
-                        for t in &taken[..ranked.len()] {
-                            if t.1 & 1 << j != 0 {
-                                change += t.0[j];
-                            }
+                let ranks = &taken[..ranked.len()];
+                let mut any = ranks.iter().fold(0, |a, t| a | t.1);
+                while any != 0 {
+                    let j = any.trailing_zeros() as usize;
+                    any &= any - 1;
+                    for t in ranks {
+                        if t.1 & 1 << j != 0 {
+                            change += t.0[j];
                         }
                     }
                 }

@@ -218,6 +218,15 @@ impl Vector {
         levels.pop().unwrap_or_default()
     }
 
+    /// Whether the level has eight f64 lanes (AVX-512).
+    pub(crate) fn lanes_of_8(self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self == Self::Avx512 {
+            return true;
+        }
+        false
+    }
+
     pub(crate) fn name(self) -> &'static str {
         match self {
             Self::Portable => "portable",
