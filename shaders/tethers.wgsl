@@ -1,4 +1,4 @@
-// Tethers on the device: the WGSL form of src/tether.rs (`TetherStage::clamp`), run after each
+// Tethers on the device: the WGSL form of src/tether/lanes.rs (`clamp_one`), run after each
 // substep's integrate passes over the same position and velocity buffers. One invocation per
 // tethered particle takes its links in order (a second anchor sees the first's clamp). An
 // anchor is pinned or attached, never a tethered particle, so no invocation reads a velocity

@@ -225,7 +225,7 @@ fn a_grid_books_its_tethers_as_its_springs_one_by_one() {
     assert!((grid.residual - loose.residual).abs() < 1e-9 * grid.limits);
 }
 
-/// The device's clamp is the CPU's (`shaders/tethers.wgsl`, the twin of `TetherStage::clamp`):
+/// The device's clamp is the CPU's (`shaders/tethers.wgsl`, the twin of `clamp_one`):
 /// the soft cloth, held by two anchors against its slack every substep, steps alike on both
 /// back ends, each frame one submit with the tethers on the device; the same cloth on the
 /// device without them ends far from both.

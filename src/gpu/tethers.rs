@@ -1,6 +1,6 @@
-//! The tethers' velocity clamp on the device (`shaders/tethers.wgsl`), the twin of
-//! [`crate::tether`]'s `TetherStage::clamp`: run after each substep's integrate passes over the
-//! particles' resident state, so a tethered cloth's frame is one submit. Each tethered particle
+//! The tethers' velocity clamp on the device (`shaders/tethers.wgsl`), the twin of the CPU's
+//! clamp of one link (`tether/lanes.rs`, `clamp_one`): run after each substep's integrate
+//! passes over the particles' resident state, so a tethered cloth's frame is one submit. Each tethered particle
 //! keeps the kinetic energy its clamps changed in its own element; the host reads them back
 //! once a frame and sums them in order. The frame's last placing stays on the host, where the
 //! state comes back at a frame's end.
