@@ -102,25 +102,105 @@ pub(super) struct Lanes<'a> {
     pub(super) linked: u8,
 }
 
-impl Lanes<'_> {
-    /// The eight links tested and clamped as [`clamp_one`] takes them one by one (the same
-    /// operations in the same order, lane by lane: the same bits), what each took in `taken`.
-    /// False, having done nothing, where the CPU has no AVX-512.
+/// One block's links, eight particles at a time and rank by rank (a particle's second anchor
+/// sees its first's clamp): where the eight share one anchor their links run side by side,
+/// otherwise one by one; the energies are added particle by particle, each particle's anchors
+/// in order, as link by link.
+pub(super) struct Block<'a> {
+    pub(super) ranked: &'a [Rank],
+    pub(super) held: &'a [(DVec3, DVec3)],
+    pub(super) x: &'a [DVec3],
+    pub(super) inv: &'a [f64],
+    pub(super) at: Substep,
+    /// The block's first particle.
+    pub(super) base: usize,
+}
+
+impl Block<'_> {
+    /// The block's clamps over its velocities `vs`: the change of kinetic energy they made.
+    /// Where the CPU has no AVX-512 the caller takes the links one by one instead.
     #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
-    pub(super) fn clamp(&mut self, vector: Vector, s: &Substep, taken: &mut Taken) -> bool {
+    pub(super) fn run(&self, vector: Vector, vs: &mut [DVec3]) -> f64 {
         match vector {
+            // SAFETY: `Vector::chosen` found the feature on this CPU.
             #[cfg(target_arch = "x86_64")]
-            Vector::Avx512 => {
-                // SAFETY: `Vector::chosen` found the feature on this CPU.
-                unsafe { self.clamp_avx512(s, taken) };
-                true
-            }
-            _ => false,
+            Vector::Avx512 => unsafe { self.run_avx512(vs) },
+            _ => unreachable!("the lanes run only where the CPU has AVX-512"),
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
+    fn run_avx512(&self, vs: &mut [DVec3]) -> f64 {
+        let Block {
+            ranked,
+            held,
+            x,
+            inv,
+            at,
+            base,
+        } = *self;
+        let mut change = 0.0;
+        // Each rank's energies per lane (read only where its lane's bit is set).
+        let mut taken: [Taken; MAX_RANKS] = [([0.0; LANES], 0); MAX_RANKS];
+        for c in (0..vs.len()).step_by(LANES) {
+            let g = (base + c) / LANES;
+            let m = LANES.min(vs.len() - c);
+            for t in &mut taken {
+                t.1 = 0;
+            }
+            for (r, t) in ranked.iter().zip(&mut taken) {
+                let (q, linked) = r.lanes[g];
+                if linked == 0 {
+                    continue;
+                }
+                let l = &r.limits[base + c..];
+                if q != MIXED {
+                    let (ya, wa) = held[q as usize];
+                    let mut lanes = Lanes {
+                        x: &x[base + c..base + c + m],
+                        v: &mut vs[c..c + m],
+                        inv: &inv[base + c..base + c + m],
+                        limits: &l[..m],
+                        linked,
+                    };
+                    lanes.clamp_avx512(&Substep { ya, wa, ..at }, t);
+                    continue;
+                }
+                let mut each = linked;
+                while each != 0 {
+                    let j = each.trailing_zeros() as usize;
+                    each &= each - 1;
+                    let (i, slot) = (base + c + j, r.slots[base + c + j]);
+                    let (ya, wa) = held[slot as usize];
+                    let s = Substep { ya, wa, ..at };
+                    if let Some(e) = clamp_one(x[i], &mut vs[c + j], inv[i], l[j], &s) {
+                        (t.0[j], t.1) = (e, t.1 | 1 << j);
+                    }
+                }
+            }
+            let ranks = &taken[..ranked.len()];
+            let mut any = ranks.iter().fold(0, |a, t| a | t.1);
+            while any != 0 {
+                let j = any.trailing_zeros() as usize;
+                any &= any - 1;
+                for t in ranks {
+                    if t.1 & 1 << j != 0 {
+                        change += t.0[j];
+                    }
+                }
+            }
+        }
+        change
+    }
+}
+
+impl Lanes<'_> {
+    /// The eight links tested and clamped as [`clamp_one`] takes them one by one (the same
+    /// operations in the same order, lane by lane: the same bits), what each took in `taken`.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f")]
+    #[inline]
     fn clamp_avx512(&mut self, s: &Substep, (each, clamped): &mut Taken) {
         use std::arch::x86_64::*;
         const _: () = assert!(std::mem::size_of::<DVec3>() == 24);
@@ -234,13 +314,10 @@ mod tests {
     /// on its anchor and one gone non-finite among them.
     #[test]
     fn eight_side_by_side_are_eight_one_by_one() {
-        let Some(vector) = Vector::available()
-            .into_iter()
-            .find(|v| v.name() == "avx512")
-        else {
+        if !Vector::available().into_iter().any(|v| v.lanes_of_8()) {
             println!("no AVX-512 here: the links run one by one only");
             return;
-        };
+        }
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut uniform = move || {
             seed ^= seed << 13;
@@ -291,7 +368,11 @@ mod tests {
                 limits: &limits,
                 linked,
             };
-            assert!(lanes.clamp(vector, &s, &mut got));
+            // SAFETY: the CPU has AVX-512 (above).
+            #[cfg(target_arch = "x86_64")]
+            unsafe {
+                lanes.clamp_avx512(&s, &mut got)
+            };
             assert_eq!(got.1, want.1, "round {round}: which lanes clamped");
             for j in 0..LANES {
                 assert_eq!(

@@ -28,7 +28,7 @@ use crate::integrate::grid::Vector;
 
 mod lanes;
 
-use lanes::{clamp_one, Lanes, Rank, Substep, Taken, LANES, MAX_RANKS, MIXED, NONE};
+use lanes::{clamp_one, Block, Rank, Substep, LANES, MAX_RANKS, MIXED, NONE};
 
 /// A cloth's tethers, as a scene gives them (`tethers: Some((slack: 0.1, anchors: 1))`).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -309,7 +309,7 @@ impl TetherStage {
             let base = k * BLOCK;
             let mut change = 0.0;
             if !vector.lanes_of_8() {
-                // Link by link, in the same order.
+                // Link by link, in the same order (as the lanes add their energies).
                 for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
                     let (i, (ya, wa)) = (i as usize, held[slot as usize]);
                     let s = Substep { ya, wa, ..at };
@@ -319,58 +319,15 @@ impl TetherStage {
                 }
                 return change;
             }
-            // Each rank's energies per lane (read only where its lane's bit is set).
-            let mut taken: [Taken; MAX_RANKS] = [([0.0; LANES], 0); MAX_RANKS];
-            for c in (0..vs.len()).step_by(LANES) {
-                let g = (base + c) / LANES;
-                let m = LANES.min(vs.len() - c);
-                for t in &mut taken {
-                    t.1 = 0;
-                }
-                for (r, t) in ranked.iter().zip(&mut taken) {
-                    let (q, linked) = r.lanes[g];
-                    if linked == 0 {
-                        continue;
-                    }
-                    let (l, v) = (&r.limits[base + c..], &mut vs[c..c + m]);
-                    if q != MIXED {
-                        let (ya, wa) = held[q as usize];
-                        let mut lanes = Lanes {
-                            x: &x[base + c..base + c + m],
-                            v,
-                            inv: &inv[base + c..base + c + m],
-                            limits: &l[..m],
-                            linked,
-                        };
-                        if lanes.clamp(vector, &Substep { ya, wa, ..at }, t) {
-                            continue;
-                        }
-                    }
-                    let mut each = linked;
-                    while each != 0 {
-                        let j = each.trailing_zeros() as usize;
-                        each &= each - 1;
-                        let (i, slot) = (base + c + j, r.slots[base + c + j]);
-                        let (ya, wa) = held[slot as usize];
-                        let s = Substep { ya, wa, ..at };
-                        if let Some(e) = clamp_one(x[i], &mut vs[c + j], inv[i], l[j], &s) {
-                            (t.0[j], t.1) = (e, t.1 | 1 << j);
-                        }
-                    }
-                }
-                let ranks = &taken[..ranked.len()];
-                let mut any = ranks.iter().fold(0, |a, t| a | t.1);
-                while any != 0 {
-                    let j = any.trailing_zeros() as usize;
-                    any &= any - 1;
-                    for t in ranks {
-                        if t.1 & 1 << j != 0 {
-                            change += t.0[j];
-                        }
-                    }
-                }
-            }
-            change
+            let block = Block {
+                ranked,
+                held,
+                x,
+                inv,
+                at,
+                base,
+            };
+            block.run(vector, vs)
         };
         let (v, sums) = (&mut packed.v, &mut self.sums);
         if self.parallel {
