@@ -133,6 +133,10 @@ enum Command {
         /// Frames of 1/60 s.
         #[arg(long, default_value_t = 60)]
         frames: u32,
+        /// Rounds of every cloth but the converged one, one after the other: each time is the
+        /// median over the rounds (the machine's noise moves single runs).
+        #[arg(long, default_value_t = 1)]
+        rounds: u32,
     },
     /// Cloth through cloth: a scene run with and without its self-collision, the triangle
     /// pairs crossing at each frame's end counted (exact test), beside the stage's cost.
@@ -225,15 +229,19 @@ fn main() -> ExitCode {
                 );
             }),
         Command::DrapePeer { scene } => drape_peer(&scene),
-        Command::GameCost { frames: 0 } => Err("--frames 0: run at least one frame".into()),
+        Command::GameCost { frames: 0, .. } => Err("--frames 0: run at least one frame".into()),
+        Command::GameCost { rounds: 0, .. } => Err("--rounds 0: run at least one round".into()),
+        Command::GameCost { rounds: 101.., .. } => {
+            Err("--rounds: at most 100 (each round takes about half a minute)".into())
+        }
         Command::Crossings {
             frames: Some(0), ..
         } => Err("--frames 0: run at least one frame".into()),
         Command::Crossings { scene, frames } => {
             harmonic_lab::crossings::report(&scene, frames).map(|r| print!("{r}"))
         }
-        Command::GameCost { frames } => {
-            harmonic_lab::game_cost::report(frames).map(|r| print!("{r}"))
+        Command::GameCost { frames, rounds } => {
+            harmonic_lab::game_cost::report(frames, rounds).map(|r| print!("{r}"))
         }
         Command::FrameTime { case, repeats } => harmonic_lab::frame_time::measure(&case, repeats)
             .map(|runs| {
