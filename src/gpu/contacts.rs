@@ -4,7 +4,6 @@
 //! sums of what the particles did to each body (a few hundred bytes), never the state.
 
 use bytemuck::{Pod, Zeroable};
-use wgpu::util::DeviceExt;
 
 use super::{GpuContext, WORKGROUP};
 use crate::error::GpuError;
@@ -135,56 +134,23 @@ impl DeviceContacts {
         let host_partials = vec![Partial::default(); (slots * groups * nc) as usize];
         let partial_bytes = std::mem::size_of_val(host_partials.as_slice()) as u64;
         ctx.scoped("contact stage", || {
+            use super::Slot::{Storage, Uniform};
             use wgpu::BufferUsages as U;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("contacts.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-            });
-            let buffer = |binding, ty, dynamic| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty,
-                    has_dynamic_offset: dynamic,
-                    min_binding_size: None,
-                },
-                count: None,
-            };
-            let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("contacts"),
-                entries: &[
-                    buffer(0, wgpu::BufferBindingType::Uniform, true),
-                    buffer(1, storage(false), false),
-                    buffer(2, storage(false), false),
-                    buffer(3, storage(true), false),
-                    buffer(4, storage(false), false),
-                    buffer(5, storage(true), false),
+            let (layout, pipeline) = super::stage_pipeline(
+                device,
+                "contacts",
+                SHADER,
+                "contact_pass",
+                &[
+                    Uniform { dynamic: true },
+                    Storage { read_only: false },
+                    Storage { read_only: false },
+                    Storage { read_only: true },
+                    Storage { read_only: false },
+                    Storage { read_only: true },
                 ],
-            });
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("contacts"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("contact_pass"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("contact_pass"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("WORKGROUP", WORKGROUP as f64)],
-                    zero_initialize_workgroup_memory: false,
-                },
-                cache: None,
-            });
-            let init = |label, bytes: &[u8], usage| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents: bytes,
-                    usage,
-                })
-            };
+            );
+            let init = |label, bytes: &[u8], usage| super::init_buffer(device, label, bytes, usage);
             let step = init("contact steps", &step_bytes, U::UNIFORM);
             let colliders = init(
                 "colliders",

@@ -55,3 +55,82 @@ pub const SHADER: &str = concat!(
 pub const WORKGROUP: u32 = 256;
 /// Workgroups per dispatch dimension (WebGPU's minimum limit).
 const MAX_GROUPS: u32 = 65_535;
+
+/// A binding of a stage's layout: a uniform (`dynamic`: at a dynamic offset) or a storage
+/// buffer (`read_only`).
+#[derive(Clone, Copy)]
+pub(crate) enum Slot {
+    Uniform { dynamic: bool },
+    Storage { read_only: bool },
+}
+
+/// A device stage's shader module, bind group layout (bindings 0, 1, … as `slots` list them)
+/// and its one compute pipeline, at `entry` with the `WORKGROUP` override: what the contact
+/// and tether stages share.
+pub(crate) fn stage_pipeline(
+    device: &wgpu::Device,
+    name: &str,
+    shader: &str,
+    entry: &str,
+    slots: &[Slot],
+) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline) {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(name),
+        source: wgpu::ShaderSource::Wgsl(shader.into()),
+    });
+    let entries: Vec<_> = (slots.iter().enumerate())
+        .map(|(binding, slot)| {
+            let (ty, has_dynamic_offset) = match *slot {
+                Slot::Uniform { dynamic } => (wgpu::BufferBindingType::Uniform, dynamic),
+                Slot::Storage { read_only } => {
+                    (wgpu::BufferBindingType::Storage { read_only }, false)
+                }
+            };
+            wgpu::BindGroupLayoutEntry {
+                binding: binding as u32,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Buffer {
+                    ty,
+                    has_dynamic_offset,
+                    min_binding_size: None,
+                },
+                count: None,
+            }
+        })
+        .collect();
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some(name),
+        entries: &entries,
+    });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(name),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(entry),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: &[("WORKGROUP", WORKGROUP as f64)],
+            zero_initialize_workgroup_memory: false,
+        },
+        cache: None,
+    });
+    (layout, pipeline)
+}
+
+/// A buffer created holding `bytes`.
+pub(crate) fn init_buffer(
+    device: &wgpu::Device,
+    label: &str,
+    bytes: &[u8],
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some(label),
+        contents: bytes,
+        usage,
+    })
+}

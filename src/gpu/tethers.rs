@@ -7,9 +7,8 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
-use wgpu::util::DeviceExt;
 
-use super::{GpuContext, WORKGROUP};
+use super::GpuContext;
 use crate::error::GpuError;
 
 /// The WGSL source of the tethers' pass: the prelude ([`super::PRELUDE`]), then
@@ -96,56 +95,23 @@ impl DeviceTethers {
         });
         let change_bytes = (setup.parts.len().max(1) * 4) as u64;
         ctx.scoped("tether stage", || {
+            use super::Slot::{Storage, Uniform};
             use wgpu::BufferUsages as U;
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("tethers.wgsl"),
-                source: wgpu::ShaderSource::Wgsl(SHADER.into()),
-            });
-            let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
-                binding,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            };
-            let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("tethers"),
-                entries: &[
-                    buffer(0, wgpu::BufferBindingType::Uniform),
-                    buffer(1, storage(true)),
-                    buffer(2, storage(false)),
-                    buffer(3, storage(true)),
-                    buffer(4, storage(true)),
-                    buffer(5, storage(false)),
+            let (layout, pipeline) = super::stage_pipeline(
+                device,
+                "tethers",
+                SHADER,
+                "tether_pass",
+                &[
+                    Uniform { dynamic: false },
+                    Storage { read_only: true },
+                    Storage { read_only: false },
+                    Storage { read_only: true },
+                    Storage { read_only: true },
+                    Storage { read_only: false },
                 ],
-            });
-            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("tethers"),
-                bind_group_layouts: &[Some(&layout)],
-                immediate_size: 0,
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("tether_pass"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("tether_pass"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[("WORKGROUP", WORKGROUP as f64)],
-                    zero_initialize_workgroup_memory: false,
-                },
-                cache: None,
-            });
-            let init = |label, bytes: &[u8], usage| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some(label),
-                    contents: bytes,
-                    usage,
-                })
-            };
+            );
+            let init = |label, bytes: &[u8], usage| super::init_buffer(device, label, bytes, usage);
             let step = init(
                 "tether step",
                 bytemuck::bytes_of(&params),
