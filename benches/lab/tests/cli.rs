@@ -97,6 +97,21 @@ fn throughput_refuses_cloths_it_cannot_time() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--repeats 0"));
 }
 
+/// The game-cost comparison refuses counts that would run nothing or for hours, by name.
+#[test]
+fn game_cost_refuses_empty_and_endless_rounds() {
+    for (args, needle) in [
+        (&["--frames", "0"][..], "--frames 0"),
+        (&["--rounds", "0"][..], "--rounds 0"),
+        (&["--rounds", "1000"][..], "--rounds: at most 100"),
+    ] {
+        let out = harmonic_lab(&[&["game-cost"][..], args].concat());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    }
+}
+
 /// Runs the lab, killing it (and failing) after 60 s.
 fn timed(args: &[&str]) -> std::process::Output {
     use std::process::Stdio;
