@@ -423,8 +423,9 @@ impl Run<'_> {
         Ok(())
     }
 
-    /// The frame's end of the device's tethers: the state and the clamps' change of energy
-    /// come back, and every particle past its limit is put back on it here.
+    /// The frame's last substep of the device's tethers: the state and the device clamps'
+    /// change of energy come back, and the substep's placing and clamp run here, as on the CPU
+    /// (the state then goes back: the clamp changed velocities).
     #[cfg(feature = "gpu")]
     fn device_tethers_end(&mut self, h: f64) -> Result<(), SimError> {
         self.state_to_host()?;

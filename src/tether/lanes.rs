@@ -118,15 +118,14 @@ pub(super) struct Block<'a> {
 
 impl Block<'_> {
     /// The block's clamps over its velocities `vs`: the change of kinetic energy they made.
-    /// Where the CPU has no AVX-512 the caller takes the links one by one instead.
-    #[cfg_attr(not(target_arch = "x86_64"), allow(unused_variables))]
-    pub(super) fn run(&self, vector: Vector, vs: &mut [DVec3]) -> f64 {
-        match vector {
+    /// Only where the CPU has AVX-512; elsewhere the caller takes the links one by one.
+    pub(super) fn run(&self, vs: &mut [DVec3]) -> f64 {
+        #[cfg(target_arch = "x86_64")]
+        if Vector::chosen().lanes_of_8() {
             // SAFETY: `Vector::chosen` found the feature on this CPU.
-            #[cfg(target_arch = "x86_64")]
-            Vector::Avx512 => unsafe { self.run_avx512(vs) },
-            _ => unreachable!("the lanes run only where the CPU has AVX-512"),
+            return unsafe { self.run_avx512(vs) };
         }
+        unreachable!("the lanes run only where the CPU has AVX-512")
     }
 
     #[cfg(target_arch = "x86_64")]

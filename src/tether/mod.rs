@@ -144,7 +144,8 @@ pub(crate) struct TetherStage {
     /// eight particles ([`LANES`]) which of them have such a link and the one anchor they
     /// share ([`MIXED`] where they do not).
     ranked: Vec<Rank>,
-    vector: Vector,
+    /// Whether the clamp runs eight particles at a time ([`lanes`]).
+    lanes: bool,
     /// What the frame's last placing moved; each block's change of `E` from the clamps, and
     /// from the placing with whether it moved any.
     moves: crate::audit::Moves,
@@ -211,9 +212,6 @@ impl TetherStage {
             from = to;
         }
         self.ranked.retain(|r| !r.slots.is_empty());
-        // A particle of two cloths' tethers (it cannot be: a cloth's tethers are its own)
-        // would have more; its links past the fourth are not taken.
-        self.ranked.truncate(MAX_RANKS);
         for r in &mut self.ranked {
             r.lanes.clear();
             (r.lanes).extend(r.slots.chunks(LANES).map(|s| {
@@ -224,7 +222,9 @@ impl TetherStage {
                 (if shared { one } else { MIXED }, linked)
             }));
         }
-        self.vector = Vector::chosen();
+        // More anchors to a particle than a scene can give (a game's own `Tethers`): link by
+        // link.
+        self.lanes = Vector::chosen().lanes_of_8() && self.ranked.len() <= MAX_RANKS;
         self.moves.reset(n);
         self.sums.resize(blocks, 0.0);
         self.placed.resize(blocks, (0.0, false));
@@ -290,7 +290,7 @@ impl TetherStage {
     fn clamp(&mut self, packed: &mut Packed, gravity: DVec3, h: f64) {
         use rayon::prelude::*;
         self.hold(packed);
-        let (ranked, held, vector) = (&self.ranked, &self.held, self.vector);
+        let (ranked, held, lanes) = (&self.ranked, &self.held, self.lanes);
         let (x, inv) = (&packed.x, &packed.inv_mass);
         let at = Substep {
             ya: DVec3::ZERO,
@@ -308,7 +308,7 @@ impl TetherStage {
         let pull = |k: usize, vs: &mut [DVec3]| {
             let base = k * BLOCK;
             let mut change = 0.0;
-            if !vector.lanes_of_8() {
+            if !lanes {
                 // Link by link, in the same order (as the lanes add their energies).
                 for &(i, slot, limit) in &links[starts[k]..starts[k + 1]] {
                     let (i, (ya, wa)) = (i as usize, held[slot as usize]);
@@ -327,7 +327,7 @@ impl TetherStage {
                 at,
                 base,
             };
-            block.run(vector, vs)
+            block.run(vs)
         };
         let (v, sums) = (&mut packed.v, &mut self.sums);
         if self.parallel {
