@@ -9,8 +9,11 @@
 //! neither depending on the triangle's winding; each is split over the three vertices by a
 //! third. Air is evaluated once a frame, at the frame's start state (its time constant, a
 //! fraction of a second, is far longer than a frame), and held over the substeps as a force:
-//! the integrate kernels read it where they read gravity, so it runs on either back end and
-//! the audit books its work with the game's forces ([`crate::EnergyAudit::forces`]).
+//! the integrate kernels read it where they read gravity, and the audit books its work with
+//! the game's forces ([`crate::EnergyAudit::forces`]). With the springs on the GPU the forces
+//! are made there (`shaders/air.wgsl`, this module's twin: the drag and lift, the wind field
+//! and its noise, whose hash is on 32 bits so both sides hash the same values) and come back
+//! for the books.
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -96,23 +99,39 @@ impl Wind {
 
     /// The wind at `x` at time `t` (m/s).
     pub fn at(&self, x: DVec3, t: f64) -> DVec3 {
+        self.field(t).at(x)
+    }
+
+    /// The field at time `t`: what the wind at any point needs, the gusts' phase split into a
+    /// whole cell and a fraction so the device's f32 keeps the fraction's precision at any `t`.
+    pub(crate) fn field(&self, t: f64) -> Field {
         let mean = DVec3::from(self.velocity);
         let Some(g) = self.gust else {
-            return mean;
+            return Field {
+                mean,
+                strength: 0.0,
+                along: DVec3::ZERO,
+                cell: 0,
+                phase: 0.0,
+                keys: [0; 3],
+            };
         };
         let speed = mean.length();
         let along = if speed > 0.0 {
-            x.dot(mean / speed)
+            mean / (speed * g.length)
         } else {
-            0.0
+            DVec3::ZERO
         };
-        let s = (along - speed * t) / g.length + t / g.period;
-        mean + g.strength
-            * DVec3::new(
-                noise(g.seed, 0, s),
-                noise(g.seed, 1, s),
-                noise(g.seed, 2, s),
-            )
+        let s0 = t / g.period - speed * t / g.length;
+        let whole = s0.floor();
+        Field {
+            mean,
+            strength: g.strength,
+            along,
+            cell: whole as i64 as u32,
+            phase: s0 - whole,
+            keys: [0, 1, 2].map(|c| channel_key(g.seed, c)),
+        }
     }
 
     /// What a scene's or [`crate::Simulation::set_wind`]'s wind must be: finite, gusts of
@@ -154,24 +173,59 @@ impl Aero {
     }
 }
 
-/// Smooth value noise in [−1, 1]: values hashed at the integers of `s`, joined by a smoothstep.
-fn noise(seed: u64, channel: u64, s: f64) -> f64 {
-    let cell = s.floor();
-    let f = s - cell;
-    let k = cell as i64 as u64;
-    let value = |k: u64| {
-        let h = splitmix(seed ^ splitmix(channel.wrapping_add(k.wrapping_mul(0x9E37_79B9))));
-        (h >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    };
-    let t = f * f * (3.0 - 2.0 * f);
-    value(k) + (value(k.wrapping_add(1)) - value(k)) * t
+/// The wind field at one time ([`Wind::field`]): `shaders/air.wgsl`'s `AirFrame` mirrors it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Field {
+    pub(crate) mean: DVec3,
+    /// The gusts' strength (0: none).
+    pub(crate) strength: f64,
+    /// `ŵ / length`: `x · along` is how many gust lengths `x` lies down the wind.
+    pub(crate) along: DVec3,
+    /// The phase `t/period − |w̄| t/length` as a whole cell (wrapping) and a fraction in [0, 1).
+    pub(crate) cell: u32,
+    pub(crate) phase: f64,
+    /// Each axis's noise key, from the seed.
+    pub(crate) keys: [u32; 3],
 }
 
-fn splitmix(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
+impl Field {
+    /// The wind at `x` (m/s): the mean, plus `strength · (N₀(s), N₁(s), N₂(s))` at
+    /// `s = x·ŵ/length + phase`.
+    pub(crate) fn at(&self, x: DVec3) -> DVec3 {
+        if self.strength == 0.0 {
+            return self.mean;
+        }
+        let s = self.phase + x.dot(self.along);
+        let whole = s.floor();
+        let cell = self.cell.wrapping_add(whole as i64 as u32);
+        let f = s - whole;
+        let n = self.keys.map(|key| noise(key, cell, f));
+        self.mean + self.strength * DVec3::from(n)
+    }
+}
+
+/// Smooth value noise in [−1, 1] at `f` ∈ [0, 1) of the way through `cell`: values hashed at
+/// the cell's ends, joined by a smoothstep. Integer steps only on 32 bits, so the device hashes
+/// the same values (`shaders/air.wgsl`, `noise`).
+fn noise(key: u32, cell: u32, f: f64) -> f64 {
+    let value = |k: u32| f64::from(hash(key ^ hash(k)) >> 8) / f64::from(1u32 << 24) * 2.0 - 1.0;
+    let t = f * f * (3.0 - 2.0 * f);
+    let (a, b) = (value(cell), value(cell.wrapping_add(1)));
+    a + (b - a) * t
+}
+
+/// An axis's key from the seed.
+fn channel_key(seed: u64, channel: u32) -> u32 {
+    hash(hash(seed as u32 ^ hash(channel.wrapping_add(1))) ^ (seed >> 32) as u32)
+}
+
+/// A 32-bit integer hash (Wellons' `lowbias32`), as the device computes it.
+pub(crate) fn hash(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^ (x >> 16)
 }
 
 /// The air's force on one triangle `[x0, x1, x2]` moving at its mean velocity `v̄`, in a wind
@@ -211,11 +265,18 @@ impl AirSurfaces {
         self.cloths.is_empty()
     }
 
+    /// The triangles, and each cloth's `(end of its triangles, its air)`.
+    #[cfg(feature = "gpu")]
+    pub(crate) fn parts(&self) -> (&[[u32; 3]], &[(usize, Aero)]) {
+        (&self.triangles, &self.cloths)
+    }
+
     /// The air's force on every particle (N, packed order) at positions `x` and velocities `v`
     /// at time `t` in `wind`, written over `out`: each triangle's force, a third to each
     /// vertex, summed in triangle order (deterministic).
     pub(crate) fn forces(&self, x: &[DVec3], v: &[DVec3], wind: &Wind, t: f64, out: &mut [DVec3]) {
         out.fill(DVec3::ZERO);
+        let field = wind.field(t);
         let mut start = 0;
         for &(end, aero) in &self.cloths {
             for t3 in &self.triangles[start..end] {
@@ -225,7 +286,7 @@ impl AirSurfaces {
                 };
                 let centre = (xa + xb + xc) / 3.0;
                 let mean_v = (v[a] + v[b] + v[c]) / 3.0;
-                let f = triangle_force(&aero, [xa, xb, xc], mean_v, wind.at(centre, t)) / 3.0;
+                let f = triangle_force(&aero, [xa, xb, xc], mean_v, field.at(centre)) / 3.0;
                 if f.is_finite() {
                     out[a] += f;
                     out[b] += f;

@@ -18,8 +18,9 @@ fn context() -> Option<Arc<GpuContext>> {
 
 /// Submits per frame, as the schedule asks: all of a frame's substeps in one where no stage
 /// needs the host between them (the tethered cloth's clamp runs on the device too); one per
-/// substep where the contacts run on the CPU (the cape's attachments) or the device's contacts
-/// push a dynamic body (the trampoline's ball).
+/// substep where the contacts run on the CPU (the cape's attachments, the flag's pole) or the
+/// device's contacts push a dynamic body (the trampoline's ball). The windy flag's air runs on
+/// the device.
 #[test]
 fn each_frame_submits_what_its_schedule_asks() {
     let Some(_ctx) = context() else { return };
@@ -31,6 +32,7 @@ fn each_frame_submits_what_its_schedule_asks() {
         ("trampoline.ron", Some(Backend::Gpu), true),
         ("cape.ron", Some(Backend::Cpu), true),
         ("tethered_cloth.ron", None, false),
+        ("windy_flag.ron", Some(Backend::Cpu), true),
     ];
     for (name, contacts_on, per_substep) in cases {
         let built = Scene::load(root.join(name))
@@ -57,6 +59,15 @@ fn each_frame_submits_what_its_schedule_asks() {
                 .find(|s| s.kind == StageKind::Contacts)
                 .map(|s| s.on);
             assert_eq!(contacts, contacts_on, "{name}: {}", sim.schedule());
+            // The air's passes run on the device with the springs (their forces come back at
+            // the frame's start, outside the step's submit).
+            let windy = name == "windy_flag.ron";
+            assert_eq!(sim.schedule().has(StageKind::Air), windy, "{name}");
+            for s in sim.schedule().stages() {
+                if s.kind == StageKind::Air {
+                    assert_eq!(s.on, Backend::Gpu, "{name}: {}", sim.schedule());
+                }
+            }
         }
     }
 }

@@ -21,7 +21,12 @@ fn shader_files() -> Vec<PathBuf> {
 }
 
 /// The step's shaders, which the prelude goes before.
-const STEP_SHADERS: [&str; 3] = ["integrate.wgsl", "contacts.wgsl", "tethers.wgsl"];
+const STEP_SHADERS: [&str; 4] = [
+    "integrate.wgsl",
+    "contacts.wgsl",
+    "tethers.wgsl",
+    "air.wgsl",
+];
 
 /// A shader file as the engine assembles it: the prelude first for a step shader.
 fn assembled(name: &str) -> String {
@@ -57,7 +62,7 @@ fn every_shader_parses_and_validates() {
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         checked += 1;
     }
-    assert_eq!(checked, 4, "integrate, contacts, render and tethers");
+    assert_eq!(checked, 5, "integrate, contacts, render, tethers and air");
 }
 
 #[test]
@@ -65,6 +70,7 @@ fn the_embedded_shaders_are_the_prelude_and_the_files() {
     assert_eq!(gpu::SHADER, assembled("integrate.wgsl"));
     assert_eq!(gpu::contacts::SHADER, assembled("contacts.wgsl"));
     assert_eq!(gpu::tethers::SHADER, assembled("tethers.wgsl"));
+    assert_eq!(gpu::air::SHADER, assembled("air.wgsl"));
     assert!(gpu::SHADER.starts_with(gpu::PRELUDE));
     // One definition: no step shader declares what the prelude does.
     for name in STEP_SHADERS {
@@ -200,6 +206,23 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         }
     );
     check_layout!(&tether_module, [tethers] Link { anchor, limit });
+    let air_module = parse("air.wgsl");
+    check_layout!(
+        &air_module,
+        [air] AirFrame {
+            mean,
+            strength,
+            along,
+            phase,
+            keys,
+            cell,
+            triangles,
+            particles,
+            _pad0,
+            _pad1
+        }
+    );
+    check_layout!(&air_module, [air] Tri { a, b, c, cloth });
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides

@@ -41,6 +41,7 @@ pub use pipelines::*;
 pub use solver::*;
 use upload::*;
 
+pub mod air;
 pub mod contacts;
 pub mod tethers;
 
@@ -65,8 +66,8 @@ pub(crate) enum Slot {
 }
 
 /// A device stage's shader module, bind group layout (bindings 0, 1, … as `slots` list them)
-/// and its one compute pipeline, at `entry` with the `WORKGROUP` override: what the contact
-/// and tether stages share.
+/// and its one compute pipeline, at `entry` with the `WORKGROUP` override: what the contact,
+/// tether and air stages share.
 pub(crate) fn stage_pipeline(
     device: &wgpu::Device,
     name: &str,
@@ -74,11 +75,23 @@ pub(crate) fn stage_pipeline(
     entry: &str,
     slots: &[Slot],
 ) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline) {
+    let (layout, [pipeline]) = stage_pipelines(device, name, shader, [entry], slots);
+    (layout, pipeline)
+}
+
+/// As [`stage_pipeline`], one pipeline per entry point over the one layout.
+pub(crate) fn stage_pipelines<const N: usize>(
+    device: &wgpu::Device,
+    name: &str,
+    shader: &str,
+    entries: [&str; N],
+    slots: &[Slot],
+) -> (wgpu::BindGroupLayout, [wgpu::ComputePipeline; N]) {
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(name),
         source: wgpu::ShaderSource::Wgsl(shader.into()),
     });
-    let entries: Vec<_> = (slots.iter().enumerate())
+    let bindings: Vec<_> = (slots.iter().enumerate())
         .map(|(binding, slot)| {
             let (ty, has_dynamic_offset) = match *slot {
                 Slot::Uniform { dynamic } => (wgpu::BufferBindingType::Uniform, dynamic),
@@ -100,25 +113,27 @@ pub(crate) fn stage_pipeline(
         .collect();
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some(name),
-        entries: &entries,
+        entries: &bindings,
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(name),
         bind_group_layouts: &[Some(&layout)],
         immediate_size: 0,
     });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(entry),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some(entry),
-        compilation_options: wgpu::PipelineCompilationOptions {
-            constants: &[("WORKGROUP", WORKGROUP as f64)],
-            zero_initialize_workgroup_memory: false,
-        },
-        cache: None,
+    let pipelines = entries.map(|entry| {
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("WORKGROUP", WORKGROUP as f64)],
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        })
     });
-    (layout, pipeline)
+    (layout, pipelines)
 }
 
 /// A buffer created holding `bytes`.

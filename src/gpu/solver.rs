@@ -26,6 +26,8 @@ pub struct GpuSolver {
     pub(super) contacts: Option<contacts::DeviceContacts>,
     /// The tethers' clamp on the device, when the scene's cloths have tethers.
     pub(super) tethers: Option<tethers::DeviceTethers>,
+    /// The air's passes on the device, when the scene's cloths feel air.
+    pub(super) air: Option<air::DeviceAir>,
     /// Step submits so far ([`Self::submits`]).
     pub(super) submits: u64,
     /// Host scratch for the external accelerations ([`Self::set_accel`]).
@@ -101,6 +103,7 @@ impl GpuSolver {
             h: f32::NAN,
             contacts: None,
             tethers: None,
+            air: None,
             submits: 0,
             host_accel: Vec::new(),
             clock,
@@ -176,6 +179,34 @@ impl GpuSolver {
     pub fn set_tether_slots(&mut self, slots: u32) {
         if let Some(t) = &mut self.tethers {
             t.slots = slots;
+        }
+    }
+
+    /// Puts the air on the device over the state uploaded last (call after each upload): its
+    /// forces then come from [`Self::air_forces`].
+    pub fn enable_air(&mut self, setup: &air::AirSetup) -> Result<(), GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(());
+        };
+        self.air = Some(air::DeviceAir::new(&self.ctx, &b.pos, &b.vel, setup)?);
+        Ok(())
+    }
+
+    /// Whether the air runs on the device.
+    pub fn has_air(&self) -> bool {
+        self.air.is_some()
+    }
+
+    /// Waits for the queued work, runs the air's passes over the device's state in `field`
+    /// and waits for their forces (N, packed order), written over `out`.
+    pub(crate) fn air_forces(
+        &mut self,
+        field: &crate::air::Field,
+        out: &mut [DVec3],
+    ) -> Result<(), GpuError> {
+        match &mut self.air {
+            Some(a) => a.forces(&self.ctx, field, out),
+            None => Ok(()),
         }
     }
 

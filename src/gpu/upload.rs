@@ -150,6 +150,7 @@ impl GpuSolver {
     ) -> Result<(), GpuError> {
         self.contacts = None;
         self.tethers = None;
+        self.air = None;
         if !packed.topology.grids.is_empty() && !integrator.runs_on_gpu_grids() {
             return Err(GpuError::Device {
                 adapter: self.ctx.describe(),

@@ -219,8 +219,8 @@ pub(crate) struct Needs {
     pub(crate) forces: bool,
     /// The game drives particles.
     pub(crate) drives: bool,
-    /// Cloths feel air.
-    pub(crate) air: bool,
+    /// Cloths feel air: where its passes run.
+    pub(crate) air: Option<Backend>,
     /// Cloths have tethers: where their clamp runs.
     pub(crate) tethers: Option<Backend>,
     /// Cloths have stretch limits.
@@ -251,10 +251,10 @@ impl Schedule {
         if n.gravity {
             push(StageKind::Gravity, n.springs_on);
         }
-        if n.air {
-            push(StageKind::Air, Backend::Cpu);
+        if let Some(on) = n.air {
+            push(StageKind::Air, on);
         }
-        if n.forces || n.air {
+        if n.forces || n.air.is_some() {
             push(StageKind::Forces, n.springs_on);
         }
         push(StageKind::Integrate, n.springs_on);
@@ -331,7 +331,7 @@ impl fmt::Display for Schedule {
                         if n == 1 { "" } else { "s" }
                     )?;
                 }
-                (StageKind::Contacts | StageKind::Tethers, _) if gpu => {
+                (StageKind::Air | StageKind::Contacts | StageKind::Tethers, _) if gpu => {
                     f.write_str(" (on the GPU)")?
                 }
                 _ => {}

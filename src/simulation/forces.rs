@@ -138,13 +138,35 @@ impl Simulation {
         }
     }
 
-    /// The air stage, once a frame: the air's forces at the frame's start state.
-    pub(super) fn blow(&mut self) {
+    /// The air stage, once a frame: the air's forces at the frame's start state, on the
+    /// device when the springs run there (its state is the frame's start).
+    pub(super) fn blow(&mut self) -> Result<(), SimError> {
         if let Some(f) = self.forces.as_mut().filter(|_| !self.air.is_empty()) {
+            #[cfg(feature = "gpu")]
+            if let Some(gpu) = self.gpu.as_mut().filter(|g| g.has_air()) {
+                gpu.air_forces(&self.config.wind.field(self.time), &mut f.air)?;
+                return Ok(());
+            }
             let p = &self.packed;
             self.air
                 .forces(&p.x, &p.v, &self.config.wind, self.time, &mut f.air);
         }
+        Ok(())
+    }
+
+    /// With the springs on the GPU, the air's passes run there too.
+    #[cfg(feature = "gpu")]
+    pub(super) fn device_air(&mut self) -> Result<(), SimError> {
+        let Some(gpu) = &mut self.gpu else {
+            return Ok(());
+        };
+        if self.air.is_empty() {
+            return Ok(());
+        }
+        let (triangles, cloths) = self.air.parts();
+        let n = self.packed.particle_count();
+        gpu.enable_air(&crate::gpu::air::AirSetup::new(triangles, cloths, n))?;
+        Ok(())
     }
 
     /// The device's kernels are specialised to the force stage's presence: a change re-uploads

@@ -380,6 +380,8 @@ impl Simulation {
         self.device_contacts()?;
         #[cfg(feature = "gpu")]
         self.device_tethers()?;
+        #[cfg(feature = "gpu")]
+        self.device_air()?;
         self.build_schedule(self.user_stage.is_some());
         Ok(())
     }
@@ -514,6 +516,11 @@ impl Simulation {
         let device_tethers = self.gpu.as_ref().is_some_and(|g| g.has_tethers());
         #[cfg(not(feature = "gpu"))]
         let device_tethers = false;
+        #[cfg(feature = "gpu")]
+        let device_air = self.gpu.as_ref().is_some_and(|g| g.has_air());
+        #[cfg(not(feature = "gpu"))]
+        let device_air = false;
+        let on = |device| if device { Backend::Gpu } else { Backend::Cpu };
         let contacts_on = match (&self.props, coupled) {
             (Some(_), _) if device_contacts => Some(Backend::Gpu),
             (Some(_), _) | (None, true) => Some(Backend::Cpu),
@@ -522,12 +529,8 @@ impl Simulation {
         self.schedule.rebuild(Needs {
             gravity: self.config.gravity != DVec3::ZERO,
             forces: self.forces.as_ref().is_some_and(|f| f.game()),
-            air: !self.air.is_empty(),
-            tethers: (!self.tethers.is_empty()).then_some(if device_tethers {
-                Backend::Gpu
-            } else {
-                Backend::Cpu
-            }),
+            air: (!self.air.is_empty()).then_some(on(device_air)),
+            tethers: (!self.tethers.is_empty()).then_some(on(device_tethers)),
             stretch: !self.stretch.is_empty(),
             collide: !self.collide.is_empty(),
             tearing: !self.tear.is_empty(),

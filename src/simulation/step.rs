@@ -73,7 +73,7 @@ impl Simulation {
         // The air stage, once a frame, at the frame's start state (before the coupling borrows
         // the bodies).
         let t = (self.timers && !self.air.is_empty()).then(Instant::now);
-        self.blow();
+        self.blow()?;
         let air_time = t.map(|t| t.elapsed());
         let open_time = if self.timers {
             t1.elapsed()
@@ -491,6 +491,8 @@ impl Simulation {
         self.device_contacts()?;
         #[cfg(feature = "gpu")]
         self.device_tethers()?;
+        #[cfg(feature = "gpu")]
+        self.device_air()?;
         self.build_schedule(self.user_stage.is_some());
         self.dirty = false;
         Ok(())

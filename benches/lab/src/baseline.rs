@@ -179,12 +179,15 @@ pub fn runs(scenes: &Path, only: Option<&str>) -> Result<Vec<(String, String, St
     // The device's frames: all substeps in one submit (the hanging cloth; the drape, with
     // the device's contacts against a fixed ball), one submit per substep (the trampoline's
     // dynamic ball on the device's contacts), and the state back every substep for the CPU's
-    // contacts (the cape's attachments, the caller's sets).
+    // contacts (the cape's attachments, the caller's sets); the tethers' clamp and the air
+    // on the device (the tethered cloth, the windy flag in its gusts).
     for file in [
         "hanging_cloth.ron",
         "drape_sphere.ron",
         "trampoline.ron",
         "cape.ron",
+        "tethered_cloth.ron",
+        "windy_flag.ron",
     ] {
         let name = format!("{file} --backend gpu");
         if wanted(&name) {
