@@ -269,3 +269,71 @@ fn the_device_clamps_as_the_cpu_does() {
     assert!(apart < 3e-5, "{apart} m");
     assert!((c.limits - g.limits).abs() < 1e-4 * c.limits);
 }
+
+/// A sheet made rolled into a half cylinder (radius 0.3 m, 30 rows round it) and pinned along
+/// its top edge hangs out straight under gravity: its tethers' rest distances run along it
+/// (to the far edge, 30 chords of the circle, 0.9420 m), not straight across (0.6 m, where
+/// the tethers would hold its far edge within 0.63 m of the pins, two thirds of its length).
+/// Measured: the far edge 0.900 m below the pins after 4 s (its bend springs keep the top
+/// rows' turn round); with the straight line's rest distances, 0.598 m.
+#[test]
+fn a_sheet_made_rolled_hangs_to_its_length_along_it() {
+    let (r, cols, rows, width) = (0.3, 9u32, 31u32, 0.4);
+    let mut v = Vec::new();
+    for k in 0..rows {
+        let theta = std::f64::consts::PI * f64::from(k) / f64::from(rows - 1);
+        for c in 0..cols {
+            let x = width * f64::from(c) / f64::from(cols - 1);
+            v.push(format!(
+                "({x}, {}, {})",
+                2.0 + r * theta.cos(),
+                r * theta.sin()
+            ));
+        }
+    }
+    let mut t = Vec::new();
+    for k in 0..rows - 1 {
+        for c in 0..cols - 1 {
+            let i = k * cols + c;
+            t.push(format!("({i}, {}, {})", i + 1, i + cols + 1));
+            t.push(format!("({i}, {}, {})", i + cols + 1, i + cols));
+        }
+    }
+    let top: Vec<String> = (0..cols).map(|c| c.to_string()).collect();
+    let text = format!(
+        "Scene(dt: 0.016666666666666666, substeps: 16, integrator: \"symplectic-euler\",
+          meshes: [(vertices: [{}], triangles: [{}], mass: 0.2,
+            stretch: (frequency: 12.0, damping_ratio: 0.3), bend: Some((frequency: 1.0, damping_ratio: 0.3)),
+            pins: [Vertices([{}])], tethers: Some((slack: 0.05, anchors: 1)))])",
+        v.join(", "),
+        t.join(", "),
+        top.join(", ")
+    );
+    let scene = Scene::parse(&text, "rolled.ron").unwrap();
+    let built = scene.build();
+    let along = 30.0 * 2.0 * r * (0.5 * std::f64::consts::PI / 30.0).sin();
+    // The far edge's tethers: its rest distance along the sheet.
+    let far: Vec<f64> = (built.world.query::<&harmonic::Tethers>().iter())
+        .flat_map(|t| t.links.clone())
+        .filter(|l| l.0 >= (rows - 1) * cols)
+        .map(|l| l.2 / 1.05)
+        .collect();
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    for _ in 0..240 {
+        sim.step().unwrap();
+    }
+    let x = sim.positions();
+    let drop = (0..cols as usize)
+        .map(|c| x[c].y - x[((rows - 1) * cols) as usize + c].y)
+        .fold(f64::MAX, f64::min);
+    println!(
+        "far edge {drop} m below the pins; along the sheet {along} m, across {} m",
+        2.0 * r
+    );
+    assert_eq!(far.len(), cols as usize);
+    for d in &far {
+        assert!((d - along).abs() < 1e-9 * along, "{d} m, not {along} m");
+    }
+    assert!(drop > 0.9 * along, "{drop} m");
+    assert!(drop <= 1.05 * along + 1e-9, "{drop} m");
+}

@@ -72,8 +72,18 @@ fn tie(
         (_, Ok(m)) => (m.first, m.count),
         _ => return,
     };
-    if let Some(t) = spec.and_then(|s| crate::tether::build(world, range.0, range.1, &s)) {
-        let _ = world.insert_one(e, t);
+    if let Some(s) = spec {
+        let mut triangles = Vec::new();
+        if let Ok(c) = world.get::<&ClothSprings>(e) {
+            c.grid.triangles(&mut triangles);
+        }
+        MeshSurface::all_of(world, e, &mut triangles);
+        for t in &mut triangles {
+            *t = t.map(|i| i.wrapping_sub(range.0));
+        }
+        if let Some(t) = crate::tether::build(world, range.0, range.1, &s, &triangles) {
+            let _ = world.insert_one(e, t);
+        }
     }
     if let Some(c) = collide {
         let layer = crate::collide::layer(world, range.0, range.1, c);

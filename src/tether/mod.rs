@@ -3,9 +3,11 @@
 //! so a soft cloth hanging from a few points does not stretch without bound (Jolt's and
 //! Chaos's long-range attachments, NvCloth's tethers).
 //!
-//! The rest distances are Euclidean, taken where the cloth is built (its rest shape): a lower
-//! bound of the geodesic one along the cloth, so a tether never holds a particle closer than
-//! the cloth itself would. After each substep's springs, a particle's velocity away from an
+//! The rest distances are taken where the cloth is built (its rest shape), along the cloth:
+//! geodesic over its triangles ([`geodesic`], a fast march), never shorter than the straight
+//! line (a cloth made curved, a cape round the shoulders, may hang out straight to its full
+//! length; a shortest path along the springs would overestimate it); a cloth without
+//! triangles (a rope) takes the straight line. After each substep's springs, a particle's velocity away from an
 //! anchor (relative to the anchor's own) is limited so that the next substep's move takes it
 //! at most to its limit, and one past it comes back: a change of kinetic energy only, booked
 //! without evaluating a spring. At a frame's last substep, a particle still past its limit
@@ -26,6 +28,7 @@ use crate::buffers::Packed;
 use crate::components::{Particle, Pin, SceneIndex};
 use crate::integrate::grid::Vector;
 
+mod geodesic;
 mod lanes;
 
 use lanes::{clamp_one, Block, Rank, Substep, LANES, MAX_RANKS, MIXED, NONE};
@@ -91,8 +94,15 @@ pub struct Tethers {
 
 /// The tethers of the cloth whose particles are scene indices `first .. first + count` in
 /// `world`, for `spec`: every particle neither pinned nor attached tied to its nearest anchors
-/// where they are now (the rest shape). None where the cloth has no anchor.
-pub fn build(world: &World, first: u32, count: u32, spec: &TetherSpec) -> Option<Tethers> {
+/// along the cloth's `triangles` (offsets from `first`) where they are now (the rest shape),
+/// by the straight line where it has none. None where the cloth has no anchor.
+pub(crate) fn build(
+    world: &World,
+    first: u32,
+    count: u32,
+    spec: &TetherSpec,
+    triangles: &[[u32; 3]],
+) -> Option<Tethers> {
     let mut parts: Vec<(u32, DVec3, bool)> = world
         .query::<(Entity, &SceneIndex, &Particle)>()
         .iter()
@@ -110,10 +120,29 @@ pub fn build(world: &World, first: u32, count: u32, spec: &TetherSpec) -> Option
     }
     let k = (spec.anchors as usize).min(anchors.len());
     let mut links = Vec::new();
+    // Along the cloth, where it is one piece with its particles numbered from 0.
+    let along = (!triangles.is_empty() && (0u32..).zip(&parts).all(|(j, p)| p.0 == j)).then(|| {
+        let rest: Vec<DVec3> = parts.iter().map(|p| p.1).collect();
+        let ids: Vec<u32> = anchors.iter().map(|a| a.0).collect();
+        geodesic::nearest(&rest, triangles, &ids, k)
+    });
     let mut near: Vec<(f64, u32)> = Vec::with_capacity(anchors.len());
     for &(i, x, held) in &parts {
         if held {
             continue;
+        }
+        if let Some(labels) = along.as_ref().map(|l| &l[i as usize]) {
+            if !labels.is_empty() {
+                // Never shorter than the straight line (the march's estimate on a curved
+                // rest shape may fall under it), and the straight line where they agree to
+                // rounding (a flat rest shape).
+                links.extend(labels.iter().map(|&(d, a)| {
+                    let line = (x - parts[a as usize].1).length();
+                    let rest = if d > line * (1.0 + 1e-9) { d } else { line };
+                    (i, a, rest * (1.0 + spec.slack))
+                }));
+                continue;
+            }
         }
         near.clear();
         near.extend(anchors.iter().map(|&(a, y)| ((x - y).length(), a)));
