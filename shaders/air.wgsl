@@ -1,8 +1,9 @@
 // Air on the device: the WGSL form of src/air.rs (`triangle_force`, the wind field's `Field::at`
-// and its `noise`), run once a frame at its start over the resident state. One invocation per
-// triangle writes a third of its drag and lift; then one per particle sums its triangles' thirds
-// in triangle order, as the CPU adds them (no atomics, the same result run to run). The host
-// reads the sums back for the frame's accelerations and the audit's books of their work.
+// and its `noise`), run once a frame at the start of its first submit over the resident state.
+// One invocation per triangle writes a third of its drag and lift; then one per particle sums
+// its triangles' thirds in triangle order, as the CPU adds them (no atomics, the same result
+// run to run), and writes the frame's acceleration, the host's `g + F/m` for the game's forces
+// plus the air's `F/m`. The sums come back with the state, for the audit's books of their work.
 
 // The prelude (shaders/prelude.wgsl: WORKGROUP, Position, linear) is joined before this file.
 
@@ -46,6 +47,10 @@ struct Tri {
 @group(0) @binding(7) var<storage, read> incident: array<u32>;
 // The air's force on each particle (N).
 @group(0) @binding(8) var<storage, read_write> force: array<vec4<f32>>;
+// The host's acceleration without the air (gravity and the game's forces), and the frame's
+// with it, which the integrate kernels read.
+@group(0) @binding(9) var<storage, read> base: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> accel: array<vec4<f32>>;
 
 // Wellons' lowbias32 (src/air.rs, `hash`).
 fn hash(v: u32) -> u32 {
@@ -139,4 +144,6 @@ fn air_particles(
         sum += thirds[incident[e]].xyz;
     }
     force[i] = vec4<f32>(sum, 0.0);
+    // w: the inverse mass (0 pinned: its acceleration is never read).
+    accel[i] = vec4<f32>(base[i].xyz + sum * vel[i].w, 0.0);
 }

@@ -59,8 +59,8 @@ fn each_frame_submits_what_its_schedule_asks() {
                 .find(|s| s.kind == StageKind::Contacts)
                 .map(|s| s.on);
             assert_eq!(contacts, contacts_on, "{name}: {}", sim.schedule());
-            // The air's passes run on the device with the springs (their forces come back at
-            // the frame's start, outside the step's submit).
+            // The air's passes run on the device with the springs, in the frame's first
+            // submit.
             let windy = name == "windy_flag.ron";
             assert_eq!(sim.schedule().has(StageKind::Air), windy, "{name}");
             for s in sim.schedule().stages() {
@@ -158,6 +158,7 @@ fn the_device_times_each_stage_where_it_has_timestamps() {
         ("trampoline.ron", true, false),
         ("cape.ron", false, false),
         ("tethered_cloth.ron", false, true),
+        ("windy_flag.ron", false, false),
     ] {
         let built = Scene::load(root.join(name)).unwrap().build();
         let config = SimConfig {
@@ -177,6 +178,7 @@ fn the_device_times_each_stage_where_it_has_timestamps() {
             let integrate = kernels[StageKind::Integrate];
             let contacts = kernels[StageKind::Contacts];
             let tethers = kernels[StageKind::Tethers];
+            let air = kernels[StageKind::Air];
             println!(
                 "{name}: integrate {integrate:?}, contacts {contacts:?}, tethers {tethers:?} of {:?}",
                 stats.total()
@@ -184,6 +186,11 @@ fn the_device_times_each_stage_where_it_has_timestamps() {
             assert!(!integrate.is_zero(), "{name}: {kernels:?}");
             assert_eq!(!contacts.is_zero(), device_contacts, "{name}: {kernels:?}");
             assert_eq!(!tethers.is_zero(), device_tethers, "{name}: {kernels:?}");
+            assert_eq!(
+                !air.is_zero(),
+                name == "windy_flag.ron",
+                "{name}: {kernels:?}"
+            );
             assert!(
                 kernels.total() <= stats.total(),
                 "{name}: {kernels:?} in {stats:?}"

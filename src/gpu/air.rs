@@ -1,8 +1,9 @@
 //! Air on the device (`shaders/air.wgsl`), the twin of the CPU's air (`src/air.rs`:
-//! `triangle_force` and the wind field): once a frame, at its start, one pass writes a third
-//! of each triangle's drag and lift and a second sums each particle's thirds in triangle order.
-//! The sums come back to the host, which adds them to the game's forces for the frame's
-//! accelerations and books their work, as it does the CPU's air.
+//! `triangle_force` and the wind field): once a frame, at the start of its first submit, one
+//! pass writes a third of each triangle's drag and lift and a second sums each particle's
+//! thirds in triangle order and adds their `F/m` to the host's acceleration (gravity and the
+//! game's forces) for the integrate kernels. The sums come back with the state, where the host
+//! books their work as it does the CPU's air: no round trip of its own.
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
@@ -125,16 +126,22 @@ pub struct DeviceAir {
     bind_group: wgpu::BindGroup,
     frame: wgpu::Buffer,
     force: wgpu::Buffer,
+    base: wgpu::Buffer,
     staging: wgpu::Buffer,
     triangles: u32,
     particles: u32,
+    /// The frame's passes are set and not yet encoded ([`Self::begin`]).
+    pub(super) queued: bool,
+    /// Their forces are on the device and not yet read back.
+    pub(super) pending: bool,
 }
 
 impl DeviceAir {
+    /// Over the state buffers `pos` and `vel`, writing the frame's accelerations into `accel`
+    /// (one per particle).
     pub(super) fn new(
         ctx: &GpuContext,
-        pos: &wgpu::Buffer,
-        vel: &wgpu::Buffer,
+        [pos, vel, accel]: [&wgpu::Buffer; 3],
         setup: &AirSetup,
     ) -> Result<Self, GpuError> {
         let device = &ctx.device;
@@ -148,11 +155,13 @@ impl DeviceAir {
         }
         let (tris, coefs) = (bytes(&setup.tris), bytes(&setup.coefs));
         let (first, incident) = (bytes(&setup.first), bytes(&setup.incident));
-        let force_bytes = (particles.max(1) * 16) as u64;
+        let per_particle = (particles.max(1) * 16) as u64;
         let thirds_bytes = (setup.tris.len().max(1) * 16) as u64;
         ctx.scoped("air stage", || {
             use super::Slot::{Storage, Uniform};
             use wgpu::BufferUsages as U;
+            let read = Storage { read_only: true };
+            let write = Storage { read_only: false };
             let (layout, [triangles_pass, particles_pass]) = super::stage_pipelines(
                 device,
                 "air",
@@ -160,14 +169,16 @@ impl DeviceAir {
                 ["air_triangles", "air_particles"],
                 &[
                     Uniform { dynamic: false },
-                    Storage { read_only: true },
-                    Storage { read_only: true },
-                    Storage { read_only: true },
-                    Storage { read_only: true },
-                    Storage { read_only: false },
-                    Storage { read_only: true },
-                    Storage { read_only: true },
-                    Storage { read_only: false },
+                    read,
+                    read,
+                    read,
+                    read,
+                    write,
+                    read,
+                    read,
+                    write,
+                    read,
+                    write,
                 ],
             );
             let init = |label, bytes: &[u8], usage| super::init_buffer(device, label, bytes, usage);
@@ -189,8 +200,9 @@ impl DeviceAir {
             let thirds = empty("air thirds", thirds_bytes, U::STORAGE);
             let first = init("air first", &first, U::STORAGE);
             let incident = init("air incident", &incident, U::STORAGE);
-            let force = empty("air force", force_bytes, U::STORAGE | U::COPY_SRC);
-            let staging = empty("air force staging", force_bytes, U::MAP_READ | U::COPY_DST);
+            let force = empty("air force", per_particle, U::STORAGE | U::COPY_SRC);
+            let base = empty("accel without air", per_particle, U::STORAGE | U::COPY_DST);
+            let staging = empty("air force staging", per_particle, U::MAP_READ | U::COPY_DST);
             let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("air"),
                 layout: &layout,
@@ -204,6 +216,8 @@ impl DeviceAir {
                     super::entry(6, &first),
                     super::entry(7, &incident),
                     super::entry(8, &force),
+                    super::entry(9, &base),
+                    super::entry(10, accel),
                 ],
             });
             Self {
@@ -212,55 +226,70 @@ impl DeviceAir {
                 bind_group,
                 frame,
                 force,
+                base,
                 staging,
                 triangles: setup.tris.len() as u32,
                 particles: particles as u32,
+                queued: false,
+                pending: false,
             }
         })
     }
 
-    /// Runs the air's passes over the device's state in `field` and waits for each particle's
-    /// force (N, packed order), written over `out`.
-    pub(crate) fn forces(
-        &mut self,
-        ctx: &GpuContext,
-        field: &crate::air::Field,
-        out: &mut [DVec3],
-    ) -> Result<(), GpuError> {
-        let n = (self.particles as usize).min(out.len());
-        if n == 0 {
-            return Ok(());
-        }
+    /// The frame's accelerations without the air (gravity and the game's forces, packed order).
+    pub(super) fn set_base(&self, queue: &wgpu::Queue, accel: &[[f32; 4]]) {
+        queue.write_buffer(&self.base, 0, bytemuck::cast_slice(accel));
+    }
+
+    /// The frame's wind: its passes go at the start of the frame's first submit.
+    pub(super) fn begin(&mut self, queue: &wgpu::Queue, field: &crate::air::Field) {
         let frame = AirFrame::of(field, self.triangles, self.particles);
-        ctx.queue
-            .write_buffer(&self.frame, 0, bytemuck::bytes_of(&frame));
-        let bytes = (n * 16) as u64;
-        super::read_staging(
-            ctx,
-            "air",
-            &self.staging,
-            bytes,
-            |encoder| {
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                        label: Some("air"),
-                        timestamp_writes: None,
-                    });
-                    pass.set_bind_group(0, &self.bind_group, &[]);
-                    pass.set_pipeline(&self.triangles_pass);
-                    super::dispatch(&mut pass, self.triangles);
-                    pass.set_pipeline(&self.particles_pass);
-                    super::dispatch(&mut pass, self.particles);
-                }
-                encoder.copy_buffer_to_buffer(&self.force, 0, &self.staging, 0, bytes);
-            },
-            |view| {
-                let force: &[[f32; 4]] = bytemuck::cast_slice(view);
-                for (o, f) in out.iter_mut().zip(force) {
-                    *o = DVec3::new(f[0].into(), f[1].into(), f[2].into());
-                }
-            },
-        )
+        queue.write_buffer(&self.frame, 0, bytemuck::bytes_of(&frame));
+        self.queued = true;
+    }
+
+    /// Encodes the frame's passes, if set and not yet encoded.
+    pub(super) fn encode(&mut self, pass: &mut wgpu::ComputePass<'_>) -> bool {
+        if !std::mem::take(&mut self.queued) {
+            return false;
+        }
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_pipeline(&self.triangles_pass);
+        super::dispatch(pass, self.triangles);
+        pass.set_pipeline(&self.particles_pass);
+        super::dispatch(pass, self.particles);
+        self.pending = true;
+        true
+    }
+
+    /// Bytes of the forces.
+    fn bytes(&self) -> u64 {
+        u64::from(self.particles) * 16
+    }
+
+    /// Encodes the forces' copy for [`Self::take`], when they are pending.
+    pub(super) fn copy_out(&self, encoder: &mut wgpu::CommandEncoder) {
+        if self.pending && self.particles > 0 {
+            encoder.copy_buffer_to_buffer(&self.force, 0, &self.staging, 0, self.bytes());
+        }
+    }
+
+    /// The pending forces (N, packed order), copied by [`Self::copy_out`] in a submit made
+    /// since, written over `out`; false (nothing written) when none were pending.
+    pub(super) fn take(&mut self, ctx: &GpuContext, out: &mut [DVec3]) -> Result<bool, GpuError> {
+        if !std::mem::take(&mut self.pending) {
+            return Ok(false);
+        }
+        if self.particles == 0 {
+            return Ok(true);
+        }
+        super::map_read(ctx, &self.staging, self.bytes(), |view| {
+            let force: &[[f32; 4]] = bytemuck::cast_slice(view);
+            for (o, f) in out.iter_mut().zip(force) {
+                *o = DVec3::new(f[0].into(), f[1].into(), f[2].into());
+            }
+        })?;
+        Ok(true)
     }
 }
 
@@ -343,13 +372,59 @@ mod tests {
         air.forces(&x32, &v32, &wind, t, &mut cpu);
         use wgpu::BufferUsages as U;
         let device = &ctx.device;
-        let pos = super::super::init_buffer(device, "pos", bytemuck::cast_slice(&pos), U::STORAGE);
-        let vel = super::super::init_buffer(device, "vel", bytemuck::cast_slice(&vel), U::STORAGE);
+        let init =
+            |label, bytes: &[u8], usage| super::super::init_buffer(device, label, bytes, usage);
+        let pos = init("pos", bytemuck::cast_slice(&pos), U::STORAGE);
+        let vel = init("vel", bytemuck::cast_slice(&vel), U::STORAGE);
+        let zero = vec![[0f32; 4]; x.len()];
+        let accel = init(
+            "accel",
+            bytemuck::cast_slice(&zero),
+            U::STORAGE | U::COPY_SRC,
+        );
         let (triangles, cloths) = air.parts();
         let setup = AirSetup::new(triangles, cloths, x.len());
-        let mut dev = DeviceAir::new(&ctx, &pos, &vel, &setup).unwrap();
+        let mut dev = DeviceAir::new(&ctx, [&pos, &vel, &accel], &setup).unwrap();
+        // The host's share: gravity, and a game's force on every particle of mass 1.
+        let base: Vec<[f32; 4]> = (0..x.len())
+            .map(|i| [0.5, -9.81, i as f32 * 1e-3, 0.0])
+            .collect();
+        dev.set_base(&ctx.queue, &base);
+        dev.begin(&ctx.queue, &wind.field(t));
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            assert!(dev.encode(&mut pass));
+            assert!(!dev.encode(&mut pass), "once a frame");
+        }
+        dev.copy_out(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: (x.len() * 16) as u64,
+            usage: U::MAP_READ | U::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut got_accel = Vec::new();
+        let bytes = (x.len() * 16) as u64;
+        super::super::read_staging(
+            &ctx,
+            "accel",
+            &staging,
+            bytes,
+            |e| e.copy_buffer_to_buffer(&accel, 0, &staging, 0, bytes),
+            |view| got_accel.extend_from_slice(bytemuck::cast_slice::<u8, [f32; 4]>(view)),
+        )
+        .unwrap();
         let mut gpu = vec![DVec3::ZERO; x.len()];
-        dev.forces(&ctx, &wind.field(t), &mut gpu).unwrap();
+        assert!(dev.take(&ctx, &mut gpu).unwrap());
+        assert!(!dev.take(&ctx, &mut gpu).unwrap(), "taken once");
+        // The acceleration is the host's plus the air's F/m (inverse mass 1).
+        for ((a, b), f) in got_accel.iter().zip(&base).zip(&gpu) {
+            let want = DVec3::new(b[0].into(), b[1].into(), b[2].into()) + *f;
+            let got = DVec3::new(a[0].into(), a[1].into(), a[2].into());
+            assert!((got - want).length() < 1e-5, "{got} against {want}");
+        }
         let scale = cpu.iter().map(|f| f.length()).fold(0.0, f64::max);
         let apart = (cpu.iter().zip(&gpu))
             .map(|(a, b)| (*a - *b).length())

@@ -182,13 +182,22 @@ impl GpuSolver {
         }
     }
 
-    /// Puts the air on the device over the state uploaded last (call after each upload): its
-    /// forces then come from [`Self::air_forces`].
+    /// Puts the air on the device over the state uploaded last (call after each upload, for a
+    /// solver uploaded with forces): each frame's first submit then starts with its passes
+    /// ([`Self::begin_air`]), and their forces come back with the state
+    /// ([`Self::take_air_forces`]).
     pub fn enable_air(&mut self, setup: &air::AirSetup) -> Result<(), GpuError> {
         let Some(b) = &self.buffers else {
             return Ok(());
         };
-        self.air = Some(air::DeviceAir::new(&self.ctx, &b.pos, &b.vel, setup)?);
+        if !self.pipelines.as_ref().is_some_and(|p| p.spec.forces) {
+            return Err(GpuError::Device {
+                adapter: self.ctx.describe(),
+                what: "air for a solver uploaded without forces".into(),
+            });
+        }
+        let buffers = [&b.pos, &b.vel, &b.accel];
+        self.air = Some(air::DeviceAir::new(&self.ctx, buffers, setup)?);
         Ok(())
     }
 
@@ -197,16 +206,19 @@ impl GpuSolver {
         self.air.is_some()
     }
 
-    /// Waits for the queued work, runs the air's passes over the device's state in `field`
-    /// and waits for their forces (N, packed order), written over `out`.
-    pub(crate) fn air_forces(
-        &mut self,
-        field: &crate::air::Field,
-        out: &mut [DVec3],
-    ) -> Result<(), GpuError> {
+    /// The frame's wind for the air's passes, which the frame's first submit starts with.
+    pub(crate) fn begin_air(&mut self, field: &crate::air::Field) {
+        if let Some(a) = &mut self.air {
+            a.begin(&self.ctx.queue, field);
+        }
+    }
+
+    /// The air's forces of the frame (N, packed order) written over `out`, once the state has
+    /// come back after them ([`Self::read_back`] copies them); false where none were waiting.
+    pub fn take_air_forces(&mut self, out: &mut [DVec3]) -> Result<bool, GpuError> {
         match &mut self.air {
-            Some(a) => a.forces(&self.ctx, field, out),
-            None => Ok(()),
+            Some(a) => a.take(&self.ctx, out),
+            None => Ok(false),
         }
     }
 
@@ -224,8 +236,9 @@ impl GpuSolver {
         }
     }
 
-    /// The frame's external accelerations (packed order, gravity included) for a solver
-    /// uploaded with forces; a device whose buffers have no room for them refuses them.
+    /// The frame's external accelerations (packed order, gravity included; without the air's
+    /// where it runs on the device) for a solver uploaded with forces; a device whose buffers
+    /// have no room for them refuses them.
     pub fn set_accel(&mut self, accel: &[DVec3]) -> Result<(), GpuError> {
         let Some(b) = &self.buffers else {
             return Ok(());
@@ -241,9 +254,15 @@ impl GpuSolver {
         self.host_accel.clear();
         self.host_accel
             .extend(accel.iter().map(|a| a.as_vec3().extend(0.0).to_array()));
-        self.ctx
-            .queue
-            .write_buffer(&b.accel, 0, bytemuck::cast_slice(&self.host_accel));
+        // With the air on the device, its passes add their share on top.
+        match &self.air {
+            Some(air) => air.set_base(&self.ctx.queue, &self.host_accel),
+            None => {
+                self.ctx
+                    .queue
+                    .write_buffer(&b.accel, 0, bytemuck::cast_slice(&self.host_accel))
+            }
+        }
         Ok(())
     }
 
@@ -312,15 +331,16 @@ impl GpuSolver {
             c.flush(&self.ctx.queue);
         }
         let tethers = self.tethers.as_ref();
+        let air = self.air.as_mut();
         let kernel = self.kernel;
         let ctx = &self.ctx;
-        // A submit's start, then the end of each stage of each substep.
+        // A submit's start, the air's end, then the end of each stage of each substep.
         let per_substep = 1 + u32::from(contacts.is_some()) + u32::from(tethers.is_some());
 
         let mut clock = self.clock.as_mut();
         if !clock
             .as_deref_mut()
-            .is_some_and(|c| c.admits(1 + substeps * per_substep))
+            .is_some_and(|c| c.admits(2 + substeps * per_substep))
         {
             clock = None;
         }
@@ -337,6 +357,12 @@ impl GpuSolver {
                 });
                 if let Some(c) = clock.as_deref_mut() {
                     c.mark(&mut pass, None);
+                }
+                // The frame's air, before its first substep.
+                if air.is_some_and(|a| a.encode(&mut pass)) {
+                    if let Some(c) = clock.as_deref_mut() {
+                        c.mark(&mut pass, Some(StageKind::Air));
+                    }
                 }
                 for s in 0..substeps {
                     pass.set_bind_group(0, &b.bind_group, &[0]);
@@ -392,7 +418,8 @@ impl GpuSolver {
     }
 
     /// Waits for the queued work and copies positions and velocities into `packed`
-    /// (pinned particles included: the kernels never write them).
+    /// (pinned particles included: the kernels never write them); the air's forces, when the
+    /// frame's are waiting, are copied for [`Self::take_air_forces`].
     pub fn read_back(&mut self, packed: &mut Packed) -> Result<(), GpuError> {
         let Some(b) = &self.buffers else {
             return Ok(());
@@ -405,6 +432,7 @@ impl GpuSolver {
         }
         let total = pos_bytes + vel_bytes;
         let clock = self.clock.as_ref();
+        let air = self.air.as_ref();
         read_staging(
             &self.ctx,
             "read back",
@@ -413,6 +441,9 @@ impl GpuSolver {
             |encoder| {
                 encoder.copy_buffer_to_buffer(&b.pos, 0, &b.staging, 0, pos_bytes);
                 encoder.copy_buffer_to_buffer(&b.vel, 0, &b.staging, pos_bytes, vel_bytes);
+                if let Some(a) = air {
+                    a.copy_out(encoder);
+                }
                 if let Some(c) = clock {
                     c.resolve(encoder);
                 }

@@ -138,20 +138,23 @@ impl Simulation {
         }
     }
 
-    /// The air stage, once a frame: the air's forces at the frame's start state, on the
-    /// device when the springs run there (its state is the frame's start).
-    pub(super) fn blow(&mut self) -> Result<(), SimError> {
+    /// The air stage, once a frame: the air's forces at the frame's start state. On the
+    /// device when the springs run there: its passes start the frame's first submit and add
+    /// their share to the accelerations there; their forces come back with the state (until
+    /// then the frame's books hold none, and no force's work is booked before the state comes
+    /// back).
+    pub(super) fn blow(&mut self) {
         if let Some(f) = self.forces.as_mut().filter(|_| !self.air.is_empty()) {
             #[cfg(feature = "gpu")]
             if let Some(gpu) = self.gpu.as_mut().filter(|g| g.has_air()) {
-                gpu.air_forces(&self.config.wind.field(self.time), &mut f.air)?;
-                return Ok(());
+                f.air.fill(DVec3::ZERO);
+                gpu.begin_air(&self.config.wind.field(self.time));
+                return;
             }
             let p = &self.packed;
             self.air
                 .forces(&p.x, &p.v, &self.config.wind, self.time, &mut f.air);
         }
-        Ok(())
     }
 
     /// With the springs on the GPU, the air's passes run there too.

@@ -18,7 +18,7 @@ pub(super) struct Run<'a> {
     pub(super) schedule: &'a Schedule,
     /// The game's forces and the frame's external accelerations, when the force stage is
     /// listed.
-    pub(super) forces: Option<&'a super::forces::Forces>,
+    pub(super) forces: Option<&'a mut super::forces::Forces>,
     /// The drives, when the drive stage is listed.
     pub(super) drives: Option<&'a mut super::drive::Drives>,
     /// The tethers, when their stage is listed.
@@ -245,12 +245,12 @@ impl Run<'_> {
             (StageKind::Integrate, _) => {
                 self.auditor.begin_substep(self.packed);
                 self.charge_audit();
-                let accel = self.forces.map(|f| &f.accel[..]);
+                let accel = self.forces.as_deref().map(|f| &f.accel[..]);
                 self.solver.substep_with(self.packed, h, accel)?;
                 self.charge(StageKind::Integrate);
                 let loss = self.solver.grid_damper_loss();
                 self.auditor.damping(self.packed, self.law, h, loss);
-                if let Some(f) = self.forces {
+                if let Some(f) = self.forces.as_deref() {
                     self.auditor.force_work(self.packed, &f.total);
                 }
                 self.charge_audit();
@@ -365,8 +365,15 @@ impl Run<'_> {
         if let Some(d) = self.device.as_mut().filter(|d| d.device_newer) {
             d.gpu.read_back(self.packed)?;
             d.device_newer = false;
+            // The frame's air, made on the device, came back with the state: its work is
+            // booked from here as the CPU's air is.
+            if let Some(f) = self.forces.as_deref_mut() {
+                if d.gpu.take_air_forces(&mut f.air)? {
+                    f.prepare(self.packed, self.gravity);
+                }
+            }
             self.charge_device();
-            if let Some(f) = self.forces {
+            if let Some(f) = self.forces.as_deref() {
                 self.auditor.force_work(self.packed, &f.total);
                 self.charge_audit();
             }

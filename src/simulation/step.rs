@@ -73,7 +73,7 @@ impl Simulation {
         // The air stage, once a frame, at the frame's start state (before the coupling borrows
         // the bodies).
         let t = (self.timers && !self.air.is_empty()).then(Instant::now);
-        self.blow()?;
+        self.blow();
         let air_time = t.map(|t| t.elapsed());
         let open_time = if self.timers {
             t1.elapsed()
@@ -99,12 +99,12 @@ impl Simulation {
         }
         // The force stage, once a frame: gravity and `F/m` summed into one acceleration.
         let t = (self.timers && self.forces.is_some()).then(Instant::now);
-        let forces = self.forces.as_mut().map(|f| {
+        if let Some(f) = self.forces.as_mut() {
             f.prepare(&self.packed, self.config.gravity);
-            &*f
-        });
+        }
+        let forces = self.forces.as_mut();
         #[cfg(feature = "gpu")]
-        if let (Some(gpu), Some(f)) = (self.gpu.as_mut(), forces) {
+        if let (Some(gpu), Some(f)) = (self.gpu.as_mut(), forces.as_deref()) {
             gpu.set_accel(&f.accel)?;
         }
         let n = self.packed.particle_count();
