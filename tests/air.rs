@@ -17,18 +17,10 @@ fn flat_mesh(n: u32, size: f64, y: f64, rest: &str) -> String {
             v.push(format!("({}, {y}, {})", f64::from(c) * d, f64::from(r) * d));
         }
     }
-    let mut t = Vec::new();
-    for r in 0..n - 1 {
-        for c in 0..n - 1 {
-            let i = r * n + c;
-            t.push(format!("({i}, {}, {})", i + 1, i + n + 1));
-            t.push(format!("({i}, {}, {})", i + n + 1, i + n));
-        }
-    }
     format!(
         "(vertices: [{}], triangles: [{}], {rest})",
         v.join(", "),
-        t.join(", ")
+        common::ron_triangles(&common::grid_triangles(n, n))
     )
 }
 

@@ -15,6 +15,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use harmonic::prelude::*;
 
+mod common;
+
 struct Tracking;
 static LIVE: AtomicUsize = AtomicUsize::new(0);
 static PEAK: AtomicUsize = AtomicUsize::new(0);
@@ -124,14 +126,7 @@ fn mesh_peak_per_particle(n: u32) -> f64 {
     let vertices = (0..n)
         .flat_map(|r| (0..n).map(move |c| [f64::from(c) * d, 1.0 - f64::from(r) * d, 0.0]))
         .collect();
-    let mut triangles = Vec::new();
-    for r in 0..n - 1 {
-        for c in 0..n - 1 {
-            let i = r * n + c;
-            triangles.push([i, i + 1, i + n + 1]);
-            triangles.push([i, i + n + 1, i + n]);
-        }
-    }
+    let triangles = common::grid_triangles(n, n);
     let mut scene = Scene::new(1.0 / 60.0);
     scene.substeps = Some(4);
     scene.integrator = Some("symplectic-euler".into());

@@ -5,6 +5,8 @@
 use harmonic::prelude::*;
 use harmonic::scene::mesh::{MeshCloth, MeshPin};
 
+mod common;
+
 /// A scene with `mesh` (RON) as its one mesh and `extra` fields before it.
 fn scene(mesh: &str, extra: &str) -> Result<Scene, harmonic::SceneError> {
     Scene::parse(
@@ -19,15 +21,7 @@ fn grid_mesh(n: u32, size: f64, y: f64) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     let vertices = (0..n)
         .flat_map(|r| (0..n).map(move |c| [f64::from(c) * d, y, f64::from(r) * d]))
         .collect();
-    let mut triangles = Vec::new();
-    for r in 0..n - 1 {
-        for c in 0..n - 1 {
-            let i = r * n + c;
-            triangles.push([i, i + 1, i + n + 1]);
-            triangles.push([i, i + n + 1, i + n]);
-        }
-    }
-    (vertices, triangles)
+    (vertices, common::grid_triangles(n, n))
 }
 
 fn mesh_ron(vertices: &[[f64; 3]], triangles: &[[u32; 3]], rest: &str) -> String {
@@ -35,14 +29,10 @@ fn mesh_ron(vertices: &[[f64; 3]], triangles: &[[u32; 3]], rest: &str) -> String
         .iter()
         .map(|p| format!("({}, {}, {})", p[0], p[1], p[2]))
         .collect();
-    let t: Vec<String> = triangles
-        .iter()
-        .map(|t| format!("({}, {}, {})", t[0], t[1], t[2]))
-        .collect();
     format!(
         "(vertices: [{}], triangles: [{}], {rest})",
         v.join(", "),
-        t.join(", ")
+        common::ron_triangles(triangles)
     )
 }
 

@@ -291,14 +291,6 @@ fn a_sheet_made_rolled_hangs_to_its_length_along_it() {
             ));
         }
     }
-    let mut t = Vec::new();
-    for k in 0..rows - 1 {
-        for c in 0..cols - 1 {
-            let i = k * cols + c;
-            t.push(format!("({i}, {}, {})", i + 1, i + cols + 1));
-            t.push(format!("({i}, {}, {})", i + cols + 1, i + cols));
-        }
-    }
     let top: Vec<String> = (0..cols).map(|c| c.to_string()).collect();
     let text = format!(
         "Scene(dt: 0.016666666666666666, substeps: 16, integrator: \"symplectic-euler\",
@@ -306,7 +298,7 @@ fn a_sheet_made_rolled_hangs_to_its_length_along_it() {
             stretch: (frequency: 12.0, damping_ratio: 0.3), bend: Some((frequency: 1.0, damping_ratio: 0.3)),
             pins: [Vertices([{}])], tethers: Some((slack: 0.05, anchors: 1)))])",
         v.join(", "),
-        t.join(", "),
+        common::ron_triangles(&common::grid_triangles(cols, rows)),
         top.join(", ")
     );
     let scene = Scene::parse(&text, "rolled.ron").unwrap();

@@ -5,6 +5,28 @@ use harmonic::prelude::*;
 
 pub mod crossing;
 
+/// The triangles of a grid of `cols × rows` vertices numbered row by row, each cell split
+/// along the diagonal from its first vertex.
+pub fn grid_triangles(cols: u32, rows: u32) -> Vec<[u32; 3]> {
+    let mut t = Vec::new();
+    for r in 0..rows - 1 {
+        for c in 0..cols - 1 {
+            let i = r * cols + c;
+            t.push([i, i + 1, i + cols + 1]);
+            t.push([i, i + cols + 1, i + cols]);
+        }
+    }
+    t
+}
+
+/// Triangles as the items of a RON list: `(a, b, c), …`.
+pub fn ron_triangles(triangles: &[[u32; 3]]) -> String {
+    let t: Vec<String> = (triangles.iter())
+        .map(|t| format!("({}, {}, {})", t[0], t[1], t[2]))
+        .collect();
+    t.join(", ")
+}
+
 /// Two particles on the x axis joined by one spring (κ, ζ) with masses `ma`, `mb`, no gravity,
 /// stretched by `d0` and stretching at `v0`; stepped at `h = ratio · h_c`.
 #[allow(clippy::too_many_arguments)]
