@@ -359,8 +359,6 @@ fn the_render_draws_the_mesh_triangles() {
 #[cfg(feature = "gpu")]
 #[test]
 fn a_mesh_cloth_on_the_gpu_matches_the_cpu() {
-    #[path = "common/mod.rs"]
-    mod common;
     let Some(_ctx) = common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)) else {
         return;
     };
