@@ -3,6 +3,9 @@
 //! - [`GpuContext`]: adapter (Vulkan or GL), device and queue.
 //! - [`GpuSolver`]: pipelines (one per entry point, specialised to the scene), buffers uploaded
 //!   at gather, substeps encoded into one submit, and a staging buffer read only on request.
+//! - The device stages beside the springs ([`contacts`], [`tethers`], [`air`]), each the twin
+//!   of its CPU module; what they share (a stage's pipelines, a dispatch over a 2-D grid of
+//!   workgroups, every read-back through a staging buffer) is defined once here.
 //!
 //! The springs go to the device in colour order, so a Gauss–Seidel colour is a contiguous range
 //! and the Jacobi passes index the same array. Cloth grids kept whole (symplectic and explicit
@@ -148,4 +151,64 @@ pub(crate) fn init_buffer(
         contents: bytes,
         usage,
     })
+}
+
+/// Encodes `copy` into `staging`, submits it, waits, and hands the first `bytes` of `staging`
+/// to `read`: every read-back from the device goes through here.
+pub(crate) fn read_staging(
+    ctx: &GpuContext,
+    what: &str,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    copy: impl FnOnce(&mut wgpu::CommandEncoder),
+    read: impl FnOnce(&[u8]),
+) -> Result<(), GpuError> {
+    ctx.scoped(what, || {
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(what) });
+        copy(&mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+    })?;
+    map_read(ctx, staging, bytes, read)
+}
+
+/// Waits for the queued work and reads the first `bytes` of a mappable `staging` buffer.
+pub(crate) fn map_read(
+    ctx: &GpuContext,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    read: impl FnOnce(&[u8]),
+) -> Result<(), GpuError> {
+    let failed = |e: &dyn std::fmt::Display| GpuError::Readback(e.to_string());
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging
+        .slice(..bytes)
+        .map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| failed(&e))?;
+    match rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(failed(&e)),
+        Err(e) => return Err(failed(&e)),
+    }
+    {
+        let view = staging.get_mapped_range(..bytes).map_err(|e| failed(&e))?;
+        read(&view);
+    }
+    staging.unmap();
+    Ok(())
+}
+
+/// One invocation per element, over a 2-D grid of workgroups when one dimension is not enough.
+pub(crate) fn dispatch(pass: &mut wgpu::ComputePass<'_>, count: u32) {
+    if count == 0 {
+        return;
+    }
+    let groups = count.div_ceil(WORKGROUP);
+    let x = groups.min(MAX_GROUPS);
+    pass.dispatch_workgroups(x, groups.div_ceil(x), 1);
 }
