@@ -27,7 +27,7 @@ pub struct StretchLimit {
     /// The most a spring may stretch, as a share of its rest length (0.1: 10 %).
     #[serde(default = "default_stretch")]
     pub stretch: f64,
-    /// Passes over the cloth's springs each substep (1 to [`MAX_PASSES`]).
+    /// Passes over the cloth's springs each substep (1 to 64).
     #[serde(default = "default_passes")]
     pub passes: u32,
 }
@@ -53,7 +53,7 @@ impl Default for StretchLimit {
 }
 
 impl StretchLimit {
-    /// What a stretch limit must be: a stretch finite and ≥ 0, 1 to [`MAX_PASSES`] passes.
+    /// What a stretch limit must be: a stretch finite and ≥ 0, 1 to 64 passes.
     pub fn check(&self) -> Result<(), String> {
         if !(self.stretch.is_finite() && self.stretch >= 0.0) {
             return Err(format!(
