@@ -220,7 +220,7 @@ fn channel_key(seed: u64, channel: u32) -> u32 {
 }
 
 /// A 32-bit integer hash (Wellons' `lowbias32`), as the device computes it.
-pub(crate) fn hash(mut x: u32) -> u32 {
+fn hash(mut x: u32) -> u32 {
     x ^= x >> 16;
     x = x.wrapping_mul(0x7feb_352d);
     x ^= x >> 15;

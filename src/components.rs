@@ -162,3 +162,12 @@ impl MeshSurface {
         }
     }
 }
+
+/// The triangles of the cloth entity `e`, a grid's ([`ClothSprings`]) or a mesh's
+/// ([`MeshSurface`]), in scene indices, appended to `out`.
+pub(crate) fn cloth_triangles(world: &hecs::World, e: hecs::Entity, out: &mut Vec<[u32; 3]>) {
+    if let Ok(c) = world.get::<&ClothSprings>(e) {
+        c.grid.triangles(out);
+    }
+    MeshSurface::all_of(world, e, out);
+}

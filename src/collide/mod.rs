@@ -263,10 +263,7 @@ impl CollideStage {
             .iter()
             .map(|(e, l)| {
                 let mut tris = Vec::new();
-                if let Ok(c) = world.get::<&crate::ClothSprings>(e) {
-                    c.grid.triangles(&mut tris);
-                }
-                crate::MeshSurface::all_of(world, e, &mut tris);
+                crate::components::cloth_triangles(world, e, &mut tris);
                 (l.first, l.spec, l.rest.clone(), tris)
             })
             .collect();

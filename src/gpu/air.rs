@@ -131,9 +131,9 @@ pub struct DeviceAir {
     triangles: u32,
     particles: u32,
     /// The frame's passes are set and not yet encoded ([`Self::begin`]).
-    pub(super) queued: bool,
+    queued: bool,
     /// Their forces are on the device and not yet read back.
-    pub(super) pending: bool,
+    pending: bool,
 }
 
 impl DeviceAir {

@@ -74,10 +74,7 @@ fn tie(
     };
     if let Some(s) = spec {
         let mut triangles = Vec::new();
-        if let Ok(c) = world.get::<&ClothSprings>(e) {
-            c.grid.triangles(&mut triangles);
-        }
-        MeshSurface::all_of(world, e, &mut triangles);
+        crate::components::cloth_triangles(world, e, &mut triangles);
         for t in &mut triangles {
             *t = t.map(|i| i.wrapping_sub(range.0));
         }

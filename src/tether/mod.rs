@@ -7,10 +7,12 @@
 //! geodesic over its triangles ([`geodesic`], a fast march), never shorter than the straight
 //! line (a cloth made curved, a cape round the shoulders, may hang out straight to its full
 //! length; a shortest path along the springs would overestimate it); a cloth without
-//! triangles (a rope) takes the straight line. After each substep's springs, a particle's velocity away from an
-//! anchor (relative to the anchor's own) is limited so that the next substep's move takes it
-//! at most to its limit, and one past it comes back: a change of kinetic energy only, booked
-//! without evaluating a spring. At a frame's last substep, a particle still past its limit
+//! triangles (a rope) takes the straight line.
+//!
+//! After each substep's springs, a particle's velocity away from an anchor (relative to the
+//! anchor's own) is limited so that the next substep's move takes it at most to its limit,
+//! and one past it comes back: a change of kinetic energy only, booked without evaluating a
+//! spring. At a frame's last substep, a particle still past its limit
 //! (its springs pulled it outward harder than gravity: by `h²` times the difference) is first
 //! put back on that sphere and its velocity away from the anchor removed, so none ends a frame
 //! past it. The audit books the change of `E` both made ([`crate::EnergyAudit::limits`], with
