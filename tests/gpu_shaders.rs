@@ -21,11 +21,12 @@ fn shader_files() -> Vec<PathBuf> {
 }
 
 /// The step's shaders, which the prelude goes before.
-const STEP_SHADERS: [&str; 4] = [
+const STEP_SHADERS: [&str; 5] = [
     "integrate.wgsl",
     "contacts.wgsl",
     "tethers.wgsl",
     "air.wgsl",
+    "collide.wgsl",
 ];
 
 /// A shader file as the engine assembles it: the prelude first for a step shader.
@@ -62,7 +63,10 @@ fn every_shader_parses_and_validates() {
         .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         checked += 1;
     }
-    assert_eq!(checked, 5, "integrate, contacts, render, tethers and air");
+    assert_eq!(
+        checked, 6,
+        "integrate, contacts, render, tethers, air and collide"
+    );
 }
 
 #[test]
@@ -71,6 +75,7 @@ fn the_embedded_shaders_are_the_prelude_and_the_files() {
     assert_eq!(gpu::contacts::SHADER, assembled("contacts.wgsl"));
     assert_eq!(gpu::tethers::SHADER, assembled("tethers.wgsl"));
     assert_eq!(gpu::air::SHADER, assembled("air.wgsl"));
+    assert_eq!(gpu::collide::SHADER, assembled("collide.wgsl"));
     assert!(gpu::SHADER.starts_with(gpu::PRELUDE));
     // One definition: no step shader declares what the prelude does.
     for name in STEP_SHADERS {
@@ -223,6 +228,25 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         }
     );
     check_layout!(&air_module, [air] Tri { a, b, c, cloth });
+    let collide_module = parse("collide.wgsl");
+    check_layout!(
+        &collide_module,
+        [collide] Find {
+            cell,
+            reach_max,
+            slack,
+            margin,
+            members,
+            triangles,
+            buckets,
+            capacity,
+            tris_at,
+            excluded_at,
+            thickness_at,
+            flags_at
+        }
+    );
+    check_layout!(&collide_module, [collide] Centre { m, cell });
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides

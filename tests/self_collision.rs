@@ -285,8 +285,9 @@ fn bad_self_collision_is_refused_by_name() {
     }
 }
 
-/// With the springs on the GPU the stage runs on the host between the device's substeps: the
-/// sheet rests on the other at the thickness there too (to the device's f32).
+/// With the springs on the GPU the candidates are found there and the pass runs on the host
+/// between the device's substeps: the sheet rests on the other at the thickness there too (to
+/// the device's f32), and a second run on the device ends with the same bits.
 #[test]
 fn a_sheet_rests_at_the_thickness_beside_the_gpu_springs() {
     if common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)).is_none() {
@@ -295,15 +296,26 @@ fn a_sheet_rests_at_the_thickness_beside_the_gpu_springs() {
     let cloths = [sheet(12, 0.0, true, LAYER), sheet(12, 0.1, false, LAYER)];
     let mut s = scene(&cloths, -9.81);
     s.backend = Some("gpu".into());
-    let mut sim = Simulation::from_scene(&s).unwrap();
-    assert!(
-        sim.schedule().has(StageKind::SelfCollision),
-        "{}",
-        sim.schedule()
-    );
-    for _ in 0..180 {
+    let run = || {
+        let mut sim = Simulation::from_scene(&s).unwrap();
         sim.step().unwrap();
-    }
+        let schedule = sim.schedule().to_string();
+        assert!(
+            schedule.contains("self-collision (its candidates found on the GPU)"),
+            "{schedule}"
+        );
+        for _ in 0..180 {
+            sim.step().unwrap();
+        }
+        sim
+    };
+    let (sim, again) = (run(), run());
+    let bits = |sim: &Simulation| -> Vec<[u64; 3]> {
+        (sim.positions().iter())
+            .map(|p| p.to_array().map(f64::to_bits))
+            .collect()
+    };
+    assert!(bits(&sim) == bits(&again), "two runs on the device differ");
     let y = sim.positions()[144..].iter().map(|p| p.y);
     let (lo, hi) = y.fold((f64::MAX, f64::MIN), |(lo, hi), y| (lo.min(y), hi.max(y)));
     println!("gpu: resting {lo:.6} .. {hi:.6} m");

@@ -28,8 +28,11 @@ use serde::{Deserialize, Serialize};
 
 use crate::buffers::Packed;
 use crate::components::{Particle, SceneIndex};
+use crate::error::GpuError;
 
 mod contact;
+#[cfg(feature = "gpu")]
+mod device;
 mod edges;
 mod search;
 
@@ -247,6 +250,9 @@ pub(crate) struct CollideStage {
     resume: bool,
     /// The change of `E` the pushes and friction made this frame (J).
     pub(crate) energy: f64,
+    /// The search against triangles on the device, where the springs run there.
+    #[cfg(feature = "gpu")]
+    device: device::OnDevice,
 }
 
 impl CollideStage {
@@ -307,6 +313,10 @@ impl CollideStage {
         self.faces.clear();
         self.crossings.clear();
         self.rebuilds = 0;
+        #[cfg(feature = "gpu")]
+        {
+            self.device.find = None;
+        }
         // The same particles collide as before the game's edit: the next frame's first test
         // sweeps from where this stage left them.
         self.resume = stepped && before.iter().copied().eq(self.members.iter().map(|m| m.0));
@@ -316,10 +326,18 @@ impl CollideStage {
         self.members.is_empty()
     }
 
+    /// Whether the candidates against triangles are found on the device.
+    pub(crate) fn finds_on_device(&self) -> bool {
+        #[cfg(feature = "gpu")]
+        return self.device.find.is_some();
+        #[cfg(not(feature = "gpu"))]
+        false
+    }
+
     /// A frame's start: its books opened, and the candidates found again from its state (the
     /// game may have moved particles since the last frame), which is the first substep's
     /// start.
-    pub(crate) fn begin_frame(&mut self, packed: &Packed) {
+    pub(crate) fn begin_frame(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.energy = 0.0;
         self.swept.clear();
         self.swept.resize(self.members.len(), 0.0);
@@ -328,7 +346,7 @@ impl CollideStage {
         } else {
             self.keep_start(packed);
         }
-        self.rebuild(packed);
+        self.rebuild(packed)
     }
 
     /// After the game moved particles between frames (through the World): the first substep
@@ -364,7 +382,7 @@ impl CollideStage {
     /// (a pair's distance, and a particle's from a triangle, changes by at most the two moves
     /// less any common one, so none outside can have closed to its thickness, nor crossed on
     /// the way: the moves are linear over the substep).
-    fn refresh(&mut self, packed: &Packed) {
+    fn refresh(&mut self, packed: &Packed) -> Result<(), GpuError> {
         let x = &packed.x;
         if self.moved_past(x, false) {
             let moves =
@@ -380,8 +398,9 @@ impl CollideStage {
                     0.0
                 }
             }));
-            self.rebuild(packed);
+            self.rebuild(packed)?;
         }
+        Ok(())
     }
 
     /// Whether a member has moved more than half the margin since the candidates were found,
@@ -410,7 +429,7 @@ impl CollideStage {
     /// The candidates within their thickness plus the margin (and the two ends' `swept`, so
     /// that a pair that crossed within the substep is found from where it ended), less
     /// neighbours along one cloth, in order.
-    fn rebuild(&mut self, packed: &Packed) {
+    fn rebuild(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.rebuilds += 1;
         let sweep = self.swept.iter().copied().fold(0.0, f64::max);
         self.reach = self.margin + 2.0 * sweep;
@@ -419,8 +438,9 @@ impl CollideStage {
         self.built
             .extend(self.members.iter().map(|m| x[m.0 as usize]));
         self.find_pairs(packed);
-        self.find_faces(packed);
+        self.find_faces(packed)?;
         self.find_crossings(packed);
+        Ok(())
     }
 
     /// The candidates, and the times they were found since the stage was gathered.
@@ -435,8 +455,12 @@ impl CollideStage {
     /// particle, against triangle, then edge against edge); the change of the particles' own
     /// energy booked. Returns whether any moved: the springs' change, from [`Self::moves`], is
     /// then the caller's to add.
-    pub(crate) fn project(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
-        self.refresh(packed);
+    pub(crate) fn project(
+        &mut self,
+        packed: &mut Packed,
+        gravity: DVec3,
+    ) -> Result<bool, GpuError> {
+        self.refresh(packed)?;
         let n = self.moves.moved.len();
         self.moves.reset(n);
         let mut any = false;
@@ -476,7 +500,7 @@ impl CollideStage {
             (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
         }
         self.keep_start(packed);
-        any
+        Ok(any)
     }
 
     /// The particles the colliders' contacts moved in the last substep (`touched`, packed

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use super::{contact, CollideStage, Face};
 use crate::buffers::Packed;
+use crate::error::GpuError;
 
 /// The furthest cell from the origin a key tells apart, on each axis.
 const SPAN: f64 = ((1 << 20) - 2) as f64;
@@ -124,10 +125,10 @@ impl CollideStage {
     /// the largest thickness plus the reach plus the widest triangle's radius wide), the
     /// particles by theirs; a triangle not its particle's, within the reach of it, and not
     /// within twice the thickness of it at rest on one cloth.
-    pub(super) fn find_faces(&mut self, packed: &Packed) {
+    pub(super) fn find_faces(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.faces.clear();
         if self.triangles.is_empty() {
-            return;
+            return Ok(());
         }
         let (x, inv) = (&packed.x, &packed.inv_mass);
         self.centres.clear();
@@ -147,6 +148,10 @@ impl CollideStage {
                 .filter(|(_, m)| x[m.0 as usize].is_finite())
                 .map(|(s, m)| (key(x[m.0 as usize], cell), s)),
         );
+        #[cfg(feature = "gpu")]
+        if self.device.find.is_some() {
+            return self.faces_on_device(packed, cell);
+        }
         self.triangle_cells.clear();
         self.triangle_cells.extend(
             (0u32..)
@@ -177,6 +182,7 @@ impl CollideStage {
             self.faces.extend_from_slice(f);
         }
         (self.runs, self.found) = (runs, found);
+        Ok(())
     }
 
     /// The candidates of the particles of `cells` (whole runs of cells) against the
@@ -199,37 +205,51 @@ impl CollideStage {
                     {
                         continue;
                     }
-                    let tri = self.triangles[k as usize];
-                    if tri.at.contains(&p) {
-                        continue;
+                    if let Some(face) = self.face(s, k, (m, r), x, inv) {
+                        faces.push(face);
                     }
-                    let (t, friction) = self.combine(lp, tri.layer);
-                    let swept = tri.slots.map(|s| self.swept[s as usize]);
-                    let reach = t
-                        + self.margin
-                        + self.swept[s as usize]
-                        + swept[0].max(swept[1]).max(swept[2]);
-                    if (xp - m).length_squared() >= (reach + r) * (reach + r) {
-                        continue;
-                    }
-                    let [a, b, c] = tri.at.map(|i| x[i as usize]);
-                    let w = closest_on_triangle(xp, a, b, c);
-                    let q = a * w[0] + b * w[1] + c * w[2];
-                    let held = tri.at.iter().all(|&i| inv[i as usize] == 0.0);
-                    if (xp - q).length_squared() >= reach * reach
-                        || (held && inv[p as usize] == 0.0)
-                    {
-                        continue;
-                    }
-                    faces.push(Face {
-                        p,
-                        triangle: k,
-                        thickness: t,
-                        friction,
-                    });
                 }
             }
         });
+    }
+
+    /// Member `s` against triangle `k` (centre and radius `m`, `r`), past the widest reach's
+    /// test and the neighbours at rest: a candidate if not its own, within the pair's reach of
+    /// its centre and then of its closest point, and not all held.
+    #[inline]
+    pub(super) fn face(
+        &self,
+        s: u32,
+        k: u32,
+        (m, r): (DVec3, f64),
+        x: &[DVec3],
+        inv: &[f64],
+    ) -> Option<Face> {
+        let (p, lp, _) = self.members[s as usize];
+        let xp = x[p as usize];
+        let tri = self.triangles[k as usize];
+        if tri.at.contains(&p) {
+            return None;
+        }
+        let (t, friction) = self.combine(lp, tri.layer);
+        let swept = tri.slots.map(|s| self.swept[s as usize]);
+        let reach = t + self.margin + self.swept[s as usize] + swept[0].max(swept[1]).max(swept[2]);
+        if (xp - m).length_squared() >= (reach + r) * (reach + r) {
+            return None;
+        }
+        let [a, b, c] = tri.at.map(|i| x[i as usize]);
+        let w = closest_on_triangle(xp, a, b, c);
+        let q = a * w[0] + b * w[1] + c * w[2];
+        let held = tri.at.iter().all(|&i| inv[i as usize] == 0.0);
+        if (xp - q).length_squared() >= reach * reach || (held && inv[p as usize] == 0.0) {
+            return None;
+        }
+        Some(Face {
+            p,
+            triangle: k,
+            thickness: t,
+            friction,
+        })
     }
 
     /// Each member's triangles of its own layer (not its own) within twice its thickness at
@@ -300,9 +320,13 @@ pub(super) fn lists(pairs: &mut [(u32, u32)], list: &mut Vec<u32>, at: &mut [u32
     }
 }
 
-/// A triangle's centre and the radius about it that holds its corners.
-fn sphere(corners: [DVec3; 3]) -> (DVec3, f64) {
+/// A triangle's centre and the radius about it that holds its corners; the radius not finite
+/// where a corner is not (such a triangle is the quarantine's, never a candidate).
+pub(super) fn sphere(corners: [DVec3; 3]) -> (DVec3, f64) {
     let m = (corners[0] + corners[1] + corners[2]) / 3.0;
+    if !m.is_finite() {
+        return (m, f64::NAN);
+    }
     let r = (corners.iter())
         .map(|c| (*c - m).length_squared())
         .fold(0.0, f64::max)

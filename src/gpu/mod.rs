@@ -45,6 +45,7 @@ pub use solver::*;
 use upload::*;
 
 pub mod air;
+pub mod collide;
 pub mod contacts;
 pub mod tethers;
 

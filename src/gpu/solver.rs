@@ -114,6 +114,11 @@ impl GpuSolver {
         &self.ctx
     }
 
+    /// The context, shared (for a stage that keeps its own device work).
+    pub fn shared_context(&self) -> Arc<GpuContext> {
+        self.ctx.clone()
+    }
+
     pub fn kernel(&self) -> Kernel {
         self.kernel
     }

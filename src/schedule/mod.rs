@@ -209,6 +209,8 @@ pub struct Schedule {
     integrator: Option<Integrator>,
     substeps: u32,
     device_per_substep: bool,
+    /// Self-collision's candidates are found on the device.
+    finds_on_device: bool,
 }
 
 /// What a scene asks of the schedule.
@@ -227,8 +229,9 @@ pub(crate) struct Needs {
     pub(crate) stretch: bool,
     /// Cloths tear.
     pub(crate) tearing: bool,
-    /// Cloths collide with themselves and each other.
-    pub(crate) collide: bool,
+    /// Cloths collide with themselves and each other: where the candidates are found (the
+    /// pass over them runs on the host).
+    pub(crate) collide: Option<Backend>,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -267,7 +270,7 @@ impl Schedule {
         if n.stretch {
             push(StageKind::StretchLimit, Backend::Cpu);
         }
-        if n.collide {
+        if n.collide.is_some() {
             push(StageKind::SelfCollision, Backend::Cpu);
         }
         if let Some(on) = n.contacts_on {
@@ -280,6 +283,7 @@ impl Schedule {
         self.integrator = Some(n.integrator);
         self.substeps = n.substeps;
         self.device_per_substep = n.device_contacts_per_substep;
+        self.finds_on_device = n.collide == Some(Backend::Gpu);
     }
 
     /// The stages in the order a frame runs them.
@@ -333,6 +337,9 @@ impl fmt::Display for Schedule {
                 }
                 (StageKind::Air | StageKind::Contacts | StageKind::Tethers, _) if gpu => {
                     f.write_str(" (on the GPU)")?
+                }
+                (StageKind::SelfCollision, _) if self.finds_on_device => {
+                    f.write_str(" (its candidates found on the GPU)")?
                 }
                 _ => {}
             }

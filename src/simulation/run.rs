@@ -113,7 +113,7 @@ impl Run<'_> {
         while k < substeps {
             let n = per_submit.min(substeps - k);
             for &s in schedule.stages() {
-                self.begin(s, k, n, h);
+                self.begin(s, k, n, h)?;
             }
             #[cfg(feature = "gpu")]
             if let Some(d) = self.device.as_mut().filter(|d| d.host_newer) {
@@ -179,7 +179,7 @@ impl Run<'_> {
 
     /// A stage's work before the batch's springs move (substeps `k + 1..=k + n`).
     #[cfg_attr(not(feature = "gpu"), allow(unused_variables))]
-    fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) {
+    fn begin(&mut self, stage: Stage, k: u32, n: u32, h: f64) -> Result<(), SimError> {
         if let (StageKind::Tethers, 0, Some(t)) = (stage.kind, k, self.tethers.as_mut()) {
             t.energy = 0.0;
             #[cfg(feature = "gpu")]
@@ -193,7 +193,7 @@ impl Run<'_> {
         if let (StageKind::SelfCollision, 0) = (stage.kind, k) {
             // The candidates from the frame's start state (on the host at a frame's start).
             if let Some(c) = self.collide.as_mut() {
-                c.begin_frame(self.packed);
+                c.begin_frame(self.packed)?;
             }
             self.charge(StageKind::SelfCollision);
         }
@@ -210,14 +210,14 @@ impl Run<'_> {
             self.charge(StageKind::Drive);
         }
         if stage.kind != StageKind::Contacts {
-            return;
+            return Ok(());
         }
         match (stage.on, self.coupling.as_mut()) {
             (Backend::Cpu, Some(c)) => c.begin_substep(self.packed),
             #[cfg(feature = "gpu")]
             (Backend::Gpu, Some(Coupling::Own(p))) => {
                 let Some(d) = self.device.as_mut() else {
-                    return;
+                    return Ok(());
                 };
                 // The bodies move first: nothing they do within the batch depends on the cloth.
                 for slot in k..k + n {
@@ -231,6 +231,7 @@ impl Run<'_> {
             _ => {}
         }
         self.charge(StageKind::Contacts);
+        Ok(())
     }
 
     /// A stage's work over the batch (substeps `k + 1..=k + n`): the one match of the kinds.
@@ -303,7 +304,7 @@ impl Run<'_> {
                     }
                 }
                 if let Some(c) = self.collide.as_mut() {
-                    if c.project(self.packed, self.gravity) {
+                    if c.project(self.packed, self.gravity)? {
                         c.energy += self.auditor.spring_change(self.packed, c.moves());
                     }
                 }

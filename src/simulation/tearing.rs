@@ -75,4 +75,16 @@ impl Simulation {
     pub fn collision_pairs(&self) -> (usize, u64) {
         self.collide.pair_count()
     }
+
+    /// With the springs on the GPU, self-collision's candidates against triangles are found
+    /// there.
+    #[cfg(feature = "gpu")]
+    pub(super) fn device_collide(&mut self) -> Result<(), SimError> {
+        if let Some(gpu) = &self.gpu {
+            if !self.collide.is_empty() {
+                self.collide.enable_device(gpu.shared_context())?;
+            }
+        }
+        Ok(())
+    }
 }

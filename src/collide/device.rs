@@ -1,0 +1,285 @@
+//! The candidates against triangles found on the device ([`crate::gpu::collide`]) where the
+//! springs run there. The device's lists hold the CPU's candidates (its tests add a slack that
+//! covers f32's rounding); each is tested again here with the CPU's own test in f64 and put in
+//! the CPU's order (members by cell, each member's triangles by cell then index), so both back
+//! ends hand the pass the same candidates, and the device finds them without the host's search.
+
+use std::sync::Arc;
+
+use super::search::key;
+use super::{CollideStage, Face};
+use crate::buffers::Packed;
+use crate::error::GpuError;
+use crate::gpu::collide::{DeviceFind, FindSetup, FindShape, HELD, OUT};
+use crate::gpu::GpuContext;
+
+/// The device's find of one gather, and the host's scratch for it.
+#[derive(Debug, Default)]
+pub(super) struct OnDevice {
+    pub(super) find: Option<DeviceFind>,
+    points: Vec<[f32; 4]>,
+    flags: Vec<u32>,
+    at: Vec<u32>,
+    list: Vec<u32>,
+    order: Vec<(u64, Face)>,
+}
+
+impl CollideStage {
+    /// The candidates against triangles found on the device from now on, until the next
+    /// gather.
+    pub(crate) fn enable_device(&mut self, ctx: Arc<GpuContext>) -> Result<(), GpuError> {
+        self.device.find = None;
+        if self.triangles.is_empty() {
+            return Ok(());
+        }
+        let setup = FindSetup {
+            layers: self.members.iter().map(|m| u32::from(m.1)).collect(),
+            tris: (self.triangles.iter())
+                .map(|t| [t.slots[0], t.slots[1], t.slots[2], u32::from(t.layer)])
+                .collect(),
+            excluded_at: self.excluded_at.clone(),
+            excluded: self.excluded.clone(),
+            thickness: self.layers.iter().map(|l| l.thickness as f32).collect(),
+        };
+        self.device.find = Some(DeviceFind::new(ctx, &setup)?);
+        Ok(())
+    }
+
+    /// `find_faces` with the search on the device: `cell` the CPU's cells' side, the centres
+    /// and the members' keys (not yet sorted) made.
+    pub(super) fn faces_on_device(&mut self, packed: &Packed, cell: f64) -> Result<(), GpuError> {
+        let mut d = std::mem::take(&mut self.device);
+        let found = self.search_on_device(&mut d, packed, cell);
+        if found.is_ok() {
+            self.order_from_device(&mut d, packed, cell);
+        }
+        self.device = d;
+        found
+    }
+
+    fn search_on_device(
+        &self,
+        d: &mut OnDevice,
+        packed: &Packed,
+        cell: f64,
+    ) -> Result<(), GpuError> {
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        d.points.clear();
+        d.flags.clear();
+        let mut scale = 0.0f64;
+        for (m, &swept) in self.members.iter().zip(&self.swept) {
+            let p = x[m.0 as usize];
+            let finite = p.is_finite();
+            if finite {
+                scale = scale.max(p.abs().max_element());
+            }
+            d.points
+                .push([p.x as f32, p.y as f32, p.z as f32, swept as f32]);
+            let held = if inv[m.0 as usize] == 0.0 { HELD } else { 0 };
+            d.flags.push(held | if finite { 0 } else { OUT });
+        }
+        let reach_max = self.thickest() + self.reach;
+        // Well over f32's rounding of the coordinates (up to `scale`), of the reach and of the
+        // triangles' radii, so the device's lists hold every pair the CPU's test passes.
+        let slack = 1e-4 * cell + 64.0 * f64::from(f32::EPSILON) * scale;
+        let shape = FindShape {
+            cell: ((cell + 2.0 * slack) * (1.0 + 1e-4)) as f32,
+            reach_max: reach_max as f32,
+            slack: slack as f32,
+            margin: self.margin as f32,
+        };
+        match d.find.as_mut() {
+            Some(find) => find.find(shape, &d.points, &d.flags, &mut d.at, &mut d.list),
+            None => Ok(()),
+        }
+    }
+
+    /// The device's lists tested again with the CPU's test and in the CPU's order.
+    fn order_from_device(&mut self, d: &mut OnDevice, packed: &Packed, cell: f64) {
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        use rayon::prelude::*;
+        self.cells.par_sort_unstable();
+        let reach_max = self.thickest() + self.reach;
+        for &(_, s) in &self.cells {
+            let (p, lp, _) = self.members[s as usize];
+            let xp = x[p as usize];
+            let excluded = &self.excluded
+                [self.excluded_at[s as usize] as usize..self.excluded_at[s as usize + 1] as usize];
+            d.order.clear();
+            let at = d.at[s as usize] as usize..d.at[s as usize + 1] as usize;
+            for &k in &d.list[at] {
+                let (m, r) = self.centres[k as usize];
+                let widest = reach_max + r;
+                let layer = self.triangles[k as usize].layer;
+                if !r.is_finite()
+                    || (xp - m).length_squared() >= widest * widest
+                    || (layer == lp && excluded.binary_search(&k).is_ok())
+                {
+                    continue;
+                }
+                if let Some(face) = self.face(s, k, (m, r), x, inv) {
+                    d.order.push((key(m, cell), face));
+                }
+            }
+            d.order.sort_unstable_by_key(|(key, f)| (*key, f.triangle));
+            self.faces.extend(d.order.iter().map(|o| o.1));
+        }
+    }
+
+    /// The device's last lists as `(member slot, triangle)` pairs, for the parity test.
+    #[cfg(test)]
+    pub(super) fn device_lists(&self) -> Vec<(u32, u32)> {
+        let d = &self.device;
+        (0..d.at.len().saturating_sub(1))
+            .flat_map(|s| {
+                let at = d.at[s] as usize..d.at[s + 1] as usize;
+                d.list[at].iter().map(move |&k| (s as u32, k))
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::HashSet;
+
+    use glam::DVec3;
+
+    use super::*;
+    use crate::collide::{SelfCollision, Triangle};
+
+    /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
+    /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
+    fn crumpled() -> (CollideStage, Packed) {
+        let mut stage = CollideStage::default();
+        let mut r = super::super::uniform(11);
+        let (n, spacing) = (24usize, 0.02);
+        let length = spacing * (n - 1) as f64;
+        let (mut x, mut inv) = (Vec::new(), Vec::new());
+        for (layer, thickness) in [0.008, 0.012].into_iter().enumerate() {
+            stage.layers.push(SelfCollision {
+                thickness,
+                friction: 0.5 + 0.2 * layer as f64,
+                kinetic_friction: 0.3,
+                edges: false,
+            });
+            stage.surfaced.push(true);
+            let first = x.len() as u32;
+            for i in 0..n {
+                for j in 0..n {
+                    let (a, b) = (i as f64 * spacing, j as f64 * spacing);
+                    let rest = DVec3::new(a, 0.0, b);
+                    let p = if layer == 0 {
+                        // Folded in half along x, the halves 12 mm apart, wavy.
+                        let side = if a < 0.5 * length { -1.0 } else { 1.0 };
+                        DVec3::new(
+                            0.5 * length - (a - 0.5 * length).abs(),
+                            0.006 * side + 0.01 * (9.0 * b).sin(),
+                            b,
+                        )
+                    } else {
+                        // Flat, turned, through the fold.
+                        let (c, s) = (0.5f64.cos(), 0.5f64.sin());
+                        DVec3::new(c * a - s * b + 0.1, 0.004 + 0.02 * b, s * a + c * b - 0.1)
+                    };
+                    let noise = DVec3::new(r(), r(), r()) * 0.003;
+                    stage
+                        .members
+                        .push((first + (i * n + j) as u32, layer as u16, rest));
+                    x.push(p + noise);
+                    inv.push(if i == 0 && j < 4 { 0.0 } else { 1.0 });
+                }
+            }
+            let id = |i: usize, j: usize| first + (i * n + j) as u32;
+            for i in 0..n - 1 {
+                for j in 0..n - 1 {
+                    for at in [
+                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                    ] {
+                        let layer = layer as u16;
+                        (stage.triangles).push(Triangle {
+                            at,
+                            slots: at,
+                            layer,
+                        });
+                    }
+                }
+            }
+        }
+        stage.find_excluded();
+        stage.margin = 0.008;
+        stage.swept = (0..x.len()).map(|_| 0.002 * (1.0 + r())).collect();
+        stage.reach = stage.margin + 2.0 * stage.swept.iter().copied().fold(0.0, f64::max);
+        x[17] = DVec3::NAN;
+        let packed = Packed {
+            x,
+            inv_mass: inv,
+            ..Default::default()
+        };
+        (stage, packed)
+    }
+
+    fn faces(stage: &CollideStage) -> Vec<(u32, u32, u64, u64, u64)> {
+        (stage.faces.iter())
+            .map(|f| {
+                let (mu, mu_s) = f.friction;
+                let bits = [f.thickness, mu, mu_s].map(f64::to_bits);
+                (f.p, f.triangle, bits[0], bits[1], bits[2])
+            })
+            .collect()
+    }
+
+    /// The device's lists hold every candidate the CPU finds and nothing past a reach wider by
+    /// far more than the slack; tested again and ordered on the host, they are the CPU's
+    /// candidates in the CPU's order, the same bits; two finds give the same lists.
+    #[test]
+    fn the_device_finds_what_the_cpu_finds() {
+        let ctx = match GpuContext::shared(true) {
+            Ok(c) => c,
+            Err(e) => {
+                assert!(
+                    std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
+                    "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
+                );
+                assert_eq!(e, GpuError::NoAdapter, "only a missing adapter may skip");
+                return;
+            }
+        };
+        let (mut stage, packed) = crumpled();
+        let pairs = |s: &CollideStage| -> HashSet<(u32, u32)> {
+            s.faces.iter().map(|f| (f.p, f.triangle)).collect()
+        };
+        stage.find_faces(&packed).unwrap();
+        let cpu = faces(&stage);
+        let found = pairs(&stage);
+        let (margin, reach) = (stage.margin, stage.reach);
+        stage.margin += 1e-4;
+        stage.reach += 1e-4;
+        stage.find_faces(&packed).unwrap();
+        let wide = pairs(&stage);
+        (stage.margin, stage.reach) = (margin, reach);
+        stage.enable_device(ctx).unwrap();
+        stage.find_faces(&packed).unwrap();
+        let lists = stage.device_lists();
+        let device: HashSet<(u32, u32)> = lists.iter().copied().collect();
+        println!(
+            "candidates: {} on the CPU, {} on the device, {} within 0.1 mm more",
+            found.len(),
+            device.len(),
+            wide.len()
+        );
+        assert!(found.len() > 1000, "{}", found.len());
+        assert_eq!(device.len(), lists.len(), "a pair listed twice");
+        let missing: Vec<_> = found.difference(&device).collect();
+        assert!(missing.is_empty(), "the device missed {missing:?}");
+        let extra: Vec<_> = device.difference(&wide).collect();
+        assert!(
+            extra.is_empty(),
+            "the device found past the slack: {extra:?}"
+        );
+        assert_eq!(faces(&stage), cpu);
+        stage.find_faces(&packed).unwrap();
+        assert_eq!(stage.device_lists(), lists);
+    }
+}
