@@ -243,7 +243,11 @@ fn pod_mirrors_match_the_wgsl_layouts() {
             tris_at,
             excluded_at,
             thickness_at,
-            flags_at
+            flags_at,
+            queries,
+            _pad0,
+            _pad1,
+            _pad2
         }
     );
     check_layout!(&collide_module, [collide] Centre { m, cell });

@@ -6,42 +6,65 @@
 
 use std::sync::Arc;
 
+use super::edges::Crossing;
 use super::search::key;
 use super::{CollideStage, Face};
 use crate::buffers::Packed;
 use crate::error::GpuError;
-use crate::gpu::collide::{DeviceFind, FindSetup, FindShape, HELD, OUT};
+use crate::gpu::collide::{DeviceFind, FindSetup, FindShape, Search, HELD, NONE, OUT};
 use crate::gpu::GpuContext;
 
 /// The device's find of one gather, and the host's scratch for it.
 #[derive(Debug, Default)]
 pub(super) struct OnDevice {
     pub(super) find: Option<DeviceFind>,
+    /// Edges against edges, where a layer asks for them.
+    pub(super) edges: Option<DeviceFind>,
     points: Vec<[f32; 4]>,
     flags: Vec<u32>,
     at: Vec<u32>,
     list: Vec<u32>,
     order: Vec<(u64, Face)>,
+    pairs: Vec<(Ordered, Ordered, Crossing)>,
 }
+
+/// An edge's place in the CPU's order: its midpoint's cell key, then its index.
+type Ordered = (u64, u32);
 
 impl CollideStage {
     /// The candidates against triangles found on the device from now on, until the next
     /// gather.
     pub(crate) fn enable_device(&mut self, ctx: Arc<GpuContext>) -> Result<(), GpuError> {
-        self.device.find = None;
+        (self.device.find, self.device.edges) = (None, None);
         if self.triangles.is_empty() {
             return Ok(());
         }
+        let layers: Vec<u32> = self.members.iter().map(|m| u32::from(m.1)).collect();
+        let thickness: Vec<f32> = self.layers.iter().map(|l| l.thickness as f32).collect();
         let setup = FindSetup {
-            layers: self.members.iter().map(|m| u32::from(m.1)).collect(),
+            search: Search::Faces,
+            layers: layers.clone(),
             tris: (self.triangles.iter())
                 .map(|t| [t.slots[0], t.slots[1], t.slots[2], u32::from(t.layer)])
                 .collect(),
             excluded_at: self.excluded_at.clone(),
             excluded: self.excluded.clone(),
-            thickness: self.layers.iter().map(|l| l.thickness as f32).collect(),
+            thickness: thickness.clone(),
         };
-        self.device.find = Some(DeviceFind::new(ctx, &setup)?);
+        self.device.find = Some(DeviceFind::new(ctx.clone(), &setup)?);
+        if !self.edges.is_empty() {
+            let setup = FindSetup {
+                search: Search::Edges,
+                layers,
+                tris: (self.edges.iter())
+                    .map(|e| [e.slots[0], e.slots[1], NONE, u32::from(e.layer)])
+                    .collect(),
+                excluded_at: self.edge_excluded_at.clone(),
+                excluded: self.edge_excluded.clone(),
+                thickness,
+            };
+            self.device.edges = Some(DeviceFind::new(ctx, &setup)?);
+        }
         Ok(())
     }
 
@@ -49,9 +72,25 @@ impl CollideStage {
     /// and the members' keys (not yet sorted) made.
     pub(super) fn faces_on_device(&mut self, packed: &Packed, cell: f64) -> Result<(), GpuError> {
         let mut d = std::mem::take(&mut self.device);
-        let found = self.search_on_device(&mut d, packed, cell);
+        let found = self.search_on_device(&mut d, Search::Faces, packed, cell);
         if found.is_ok() {
             self.order_from_device(&mut d, packed, cell);
+        }
+        self.device = d;
+        found
+    }
+
+    /// `find_crossings` with the search on the device: `cell` the CPU's cells' side, the
+    /// midpoints and their keys (sorted) made.
+    pub(super) fn crossings_on_device(
+        &mut self,
+        packed: &Packed,
+        cell: f64,
+    ) -> Result<(), GpuError> {
+        let mut d = std::mem::take(&mut self.device);
+        let found = self.search_on_device(&mut d, Search::Edges, packed, cell);
+        if found.is_ok() {
+            self.crossings_from_device(&mut d, packed, cell);
         }
         self.device = d;
         found
@@ -60,6 +99,7 @@ impl CollideStage {
     fn search_on_device(
         &self,
         d: &mut OnDevice,
+        search: Search,
         packed: &Packed,
         cell: f64,
     ) -> Result<(), GpuError> {
@@ -88,7 +128,11 @@ impl CollideStage {
             slack: slack as f32,
             margin: self.margin as f32,
         };
-        match d.find.as_mut() {
+        let find = match search {
+            Search::Faces => d.find.as_mut(),
+            Search::Edges => d.edges.as_mut(),
+        };
+        match find {
             Some(find) => find.find(shape, &d.points, &d.flags, &mut d.at, &mut d.list),
             None => Ok(()),
         }
@@ -126,6 +170,43 @@ impl CollideStage {
         }
     }
 
+    /// The device's lists of edges tested again with the CPU's test, each pair once from the
+    /// first of its two in the cells' order, and in the CPU's order.
+    fn crossings_from_device(&mut self, d: &mut OnDevice, packed: &Packed, cell: f64) {
+        let (x, inv) = (&packed.x, &packed.inv_mass);
+        let reach_max = self.thickest() + self.reach;
+        d.pairs.clear();
+        let queries = d.at.len().saturating_sub(1);
+        for s in 0..queries as u32 {
+            let (ms, rs) = self.edge_centres[s as usize];
+            if !(ms.is_finite() && rs.is_finite()) {
+                continue;
+            }
+            let own = (key(ms, cell), s);
+            let e = self.edges[s as usize];
+            let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
+                ..self.edge_excluded_at[s as usize + 1] as usize];
+            for &u in &d.list[d.at[s as usize] as usize..d.at[s as usize + 1] as usize] {
+                let (m, r) = self.edge_centres[u as usize];
+                let other = (key(m, cell), u);
+                let widest = reach_max + rs + r;
+                if !(m.is_finite() && r.is_finite())
+                    || other <= own
+                    || (ms - m).length_squared() >= widest * widest
+                    || (self.edges[u as usize].layer == e.layer
+                        && excluded.binary_search(&u).is_ok())
+                {
+                    continue;
+                }
+                if let Some(c) = self.crossing(s, u, (ms, rs), (m, r), x, inv) {
+                    d.pairs.push((own, other, c));
+                }
+            }
+        }
+        d.pairs.sort_unstable_by_key(|p| (p.0, p.1));
+        self.crossings.extend(d.pairs.iter().map(|p| p.2));
+    }
+
     /// The device's last lists as `(member slot, triangle)` pairs, for the parity test.
     #[cfg(test)]
     pub(super) fn device_lists(&self) -> Vec<(u32, u32)> {
@@ -161,7 +242,7 @@ mod tests {
                 thickness,
                 friction: 0.5 + 0.2 * layer as f64,
                 kinetic_friction: 0.3,
-                edges: false,
+                edges: true,
             });
             stage.surfaced.push(true);
             let first = x.len() as u32;
@@ -208,6 +289,7 @@ mod tests {
             }
         }
         stage.find_excluded();
+        stage.gather_edges();
         stage.margin = 0.008;
         stage.swept = (0..x.len()).map(|_| 0.002 * (1.0 + r())).collect();
         stage.reach = stage.margin + 2.0 * stage.swept.iter().copied().fold(0.0, f64::max);
@@ -218,6 +300,22 @@ mod tests {
             ..Default::default()
         };
         (stage, packed)
+    }
+
+    /// The shared context, or `None` where there is no adapter at all (a skip only when
+    /// `HARMONIC_REQUIRE_GPU` is unset).
+    fn context() -> Option<Arc<GpuContext>> {
+        match GpuContext::shared(true) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                assert!(
+                    std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
+                    "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
+                );
+                assert_eq!(e, GpuError::NoAdapter, "only a missing adapter may skip");
+                None
+            }
+        }
     }
 
     fn faces(stage: &CollideStage) -> Vec<(u32, u32, u64, u64, u64)> {
@@ -235,17 +333,7 @@ mod tests {
     /// candidates in the CPU's order, the same bits; two finds give the same lists.
     #[test]
     fn the_device_finds_what_the_cpu_finds() {
-        let ctx = match GpuContext::shared(true) {
-            Ok(c) => c,
-            Err(e) => {
-                assert!(
-                    std::env::var_os("HARMONIC_REQUIRE_GPU").is_none(),
-                    "HARMONIC_REQUIRE_GPU is set but no adapter: {e}"
-                );
-                assert_eq!(e, GpuError::NoAdapter, "only a missing adapter may skip");
-                return;
-            }
-        };
+        let Some(ctx) = context() else { return };
         let (mut stage, packed) = crumpled();
         let pairs = |s: &CollideStage| -> HashSet<(u32, u32)> {
             s.faces.iter().map(|f| (f.p, f.triangle)).collect()
@@ -280,6 +368,63 @@ mod tests {
         );
         assert_eq!(faces(&stage), cpu);
         stage.find_faces(&packed).unwrap();
+        assert_eq!(stage.device_lists(), lists);
+    }
+
+    fn crossings(stage: &CollideStage) -> Vec<(u32, u32, u64, u64, u64)> {
+        (stage.crossings.iter())
+            .map(|c| {
+                let (mu, mu_s) = c.friction;
+                let bits = [c.thickness, mu, mu_s].map(f64::to_bits);
+                (c.a, c.b, bits[0], bits[1], bits[2])
+            })
+            .collect()
+    }
+
+    /// As above, of edges against edges: the device lists each pair both ways, the CPU once.
+    #[test]
+    fn the_device_finds_the_edges_the_cpu_finds() {
+        let Some(ctx) = context() else { return };
+        let (mut stage, packed) = crumpled();
+        let pairs = |s: &CollideStage| -> HashSet<(u32, u32)> {
+            let once = |c: &Crossing| (c.a.min(c.b), c.a.max(c.b));
+            s.crossings.iter().map(once).collect()
+        };
+        stage.find_crossings(&packed).unwrap();
+        let cpu = crossings(&stage);
+        let found = pairs(&stage);
+        let (margin, reach) = (stage.margin, stage.reach);
+        stage.margin += 1e-4;
+        stage.reach += 1e-4;
+        stage.find_crossings(&packed).unwrap();
+        let wide = pairs(&stage);
+        (stage.margin, stage.reach) = (margin, reach);
+        stage.enable_device(ctx).unwrap();
+        stage.find_crossings(&packed).unwrap();
+        let lists = stage.device_lists();
+        let device: HashSet<(u32, u32)> =
+            lists.iter().map(|&(s, u)| (s.min(u), s.max(u))).collect();
+        println!(
+            "edge pairs: {} on the CPU, {} on the device, {} within 0.1 mm more",
+            found.len(),
+            device.len(),
+            wide.len()
+        );
+        assert!(found.len() > 1000, "{}", found.len());
+        assert_eq!(
+            2 * device.len(),
+            lists.len(),
+            "a pair not listed both ways, or twice"
+        );
+        let missing: Vec<_> = found.difference(&device).collect();
+        assert!(missing.is_empty(), "the device missed {missing:?}");
+        let extra: Vec<_> = device.difference(&wide).collect();
+        assert!(
+            extra.is_empty(),
+            "the device found past the slack: {extra:?}"
+        );
+        assert_eq!(crossings(&stage), cpu);
+        stage.find_crossings(&packed).unwrap();
         assert_eq!(stage.device_lists(), lists);
     }
 }

@@ -9,14 +9,15 @@ use glam::DVec3;
 use super::search::{beside, key, lists, split_runs};
 use super::{contact, CollideStage};
 use crate::buffers::Packed;
+use crate::error::GpuError;
 
 /// A colliding triangle's edge: its ends' packed indices (ascending) and member slots, and
 /// its layer.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Edge {
     pub(super) at: [u32; 2],
-    slots: [u32; 2],
-    layer: u16,
+    pub(super) slots: [u32; 2],
+    pub(super) layer: u16,
 }
 
 /// A candidate of an edge against another (indices into the edges, each pair once), with the pair's
@@ -106,10 +107,10 @@ impl CollideStage {
     /// Edge against edge: the edges sorted by the cell of their midpoints (cells the largest
     /// thickness plus the reach plus the longest edge wide); each pair within the reach, not
     /// within twice the thickness at rest on one cloth, and not held at all four ends, once.
-    pub(super) fn find_crossings(&mut self, packed: &Packed) {
+    pub(super) fn find_crossings(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.crossings.clear();
         if self.edges.is_empty() {
-            return;
+            return Ok(());
         }
         let x = &packed.x;
         self.edge_centres.clear();
@@ -131,6 +132,10 @@ impl CollideStage {
         );
         use rayon::prelude::*;
         self.edge_cells.par_sort_unstable();
+        #[cfg(feature = "gpu")]
+        if self.device.edges.is_some() {
+            return self.crossings_on_device(packed, cell);
+        }
         // The midpoints beside their keys, so the search reads them in order.
         self.edge_sorted.clear();
         (self.edge_sorted).extend(self.edge_cells.iter().map(|&(_, k)| {
@@ -153,6 +158,7 @@ impl CollideStage {
             self.crossings.extend_from_slice(f);
         }
         (self.runs, self.found_crossings) = (runs, found);
+        Ok(())
     }
 
     /// The candidates of the edges of `cells` (whole runs of cells) against those after them
@@ -165,14 +171,12 @@ impl CollideStage {
         out: &mut Vec<Crossing>,
     ) {
         let reach_max = self.thickest() + self.reach;
-        let swept = |e: &Edge| self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
         beside(cells, &self.edge_cells, |run, near| {
             for &(key, s) in run {
                 let e = self.edges[s as usize];
                 let (ms, rs) = self.edge_centres[s as usize];
                 let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
                     ..self.edge_excluded_at[s as usize + 1] as usize];
-                let held = |e: &Edge| e.at.iter().all(|&i| inv[i as usize] == 0.0);
                 // Each pair once, from the first of the two in the sorted order: only the later
                 // entries of the run's column, and the columns after it.
                 let (from, to) = (near[4].start, near[4].end);
@@ -185,29 +189,48 @@ impl CollideStage {
                     {
                         continue;
                     }
-                    let f = self.edges[u as usize];
-                    if f.at.iter().any(|i| e.at.contains(i)) || (held(&e) && held(&f)) {
-                        continue;
-                    }
-                    let (t, friction) = self.combine(e.layer, f.layer);
-                    let reach = t + self.margin + swept(&e) + swept(&f);
-                    if (ms - m).length_squared() >= (reach + rs + r) * (reach + rs + r) {
-                        continue;
-                    }
-                    let [a, b] = e.at.map(|i| x[i as usize]);
-                    let [c, d] = f.at.map(|i| x[i as usize]);
-                    let (p, q) = closest_on_segments(a, b, c, d);
-                    if (p - q).length_squared() < reach * reach {
-                        out.push(Crossing {
-                            a: s,
-                            b: u,
-                            thickness: t,
-                            friction,
-                        });
+                    if let Some(c) = self.crossing(s, u, (ms, rs), (m, r), x, inv) {
+                        out.push(c);
                     }
                 }
             }
         });
+    }
+
+    /// Edge `s` (midpoint and half length `ms`, `rs`) against edge `u` (`m`, `r`), past the
+    /// widest reach's test and the neighbours at rest: a candidate if they share no end, are
+    /// not all held, and are within the pair's reach of each other's midpoint and then at
+    /// their closest points.
+    #[inline]
+    pub(super) fn crossing(
+        &self,
+        s: u32,
+        u: u32,
+        (ms, rs): (DVec3, f64),
+        (m, r): (DVec3, f64),
+        x: &[DVec3],
+        inv: &[f64],
+    ) -> Option<Crossing> {
+        let swept = |e: &Edge| self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
+        let held = |e: &Edge| e.at.iter().all(|&i| inv[i as usize] == 0.0);
+        let (e, f) = (self.edges[s as usize], self.edges[u as usize]);
+        if f.at.iter().any(|i| e.at.contains(i)) || (held(&e) && held(&f)) {
+            return None;
+        }
+        let (t, friction) = self.combine(e.layer, f.layer);
+        let reach = t + self.margin + swept(&e) + swept(&f);
+        if (ms - m).length_squared() >= (reach + rs + r) * (reach + rs + r) {
+            return None;
+        }
+        let [a, b] = e.at.map(|i| x[i as usize]);
+        let [c, d] = f.at.map(|i| x[i as usize]);
+        let (p, q) = closest_on_segments(a, b, c, d);
+        ((p - q).length_squared() < reach * reach).then_some(Crossing {
+            a: s,
+            b: u,
+            thickness: t,
+            friction,
+        })
     }
 }
 

@@ -439,7 +439,7 @@ impl CollideStage {
             .extend(self.members.iter().map(|m| x[m.0 as usize]));
         self.find_pairs(packed);
         self.find_faces(packed)?;
-        self.find_crossings(packed);
+        self.find_crossings(packed)?;
         Ok(())
     }
 

@@ -1,9 +1,10 @@
 //! Self-collision's candidates found on the device (`shaders/collide.wgsl`), the twin of the
-//! CPU's search (`find_faces` in `src/collide/search.rs`): the triangles put in hashed cells
-//! by a counting sort with integer atomics, each bucket then in triangle order, and each
-//! member's triangles within its reach counted, placed by a scan and written, so every run
-//! gives the same lists. One submit and one read-back a find. The host tests each candidate
-//! again in f64 and orders them as the CPU does (`src/collide/device.rs`).
+//! CPU's searches (`find_faces` in `src/collide/search.rs`, `find_crossings` in
+//! `src/collide/edges.rs`): the items (triangles, or edges) put in hashed cells by a counting
+//! sort with integer atomics, each bucket then in item order, and each query's (a member's, or
+//! an edge's) items within its reach counted, placed by a scan and written, so every run gives
+//! the same lists. One submit and one read-back a find. The host tests each candidate again in
+//! f64 and orders them as the CPU does (`src/collide/device.rs`).
 
 use std::sync::Arc;
 
@@ -35,6 +36,10 @@ pub struct Find {
     pub excluded_at: u32,
     pub thickness_at: u32,
     pub flags_at: u32,
+    pub queries: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
 }
 
 /// `Centre` in shaders/collide.wgsl.
@@ -49,15 +54,26 @@ pub struct Centre {
 pub const HELD: u32 = 1;
 pub const OUT: u32 = 2;
 
+/// What the find searches: members against triangles, or edges against edges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Search {
+    Faces,
+    Edges,
+}
+
+/// The third corner of an edge (the shader's `NONE`).
+pub const NONE: u32 = u32::MAX;
+
 /// What the find needs of a gather, by member slot.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct FindSetup {
+    pub search: Search,
     /// Each member's layer.
     pub layers: Vec<u32>,
-    /// Each triangle's corners (member slots) and layer.
+    /// Each item's corners (member slots; an edge's third [`NONE`]) and layer.
     pub tris: Vec<[u32; 4]>,
-    /// Member `s`'s neighbours at rest are `excluded[excluded_at[s]..excluded_at[s + 1]]`,
-    /// ascending.
+    /// Query `s`'s (a member's, or an edge's) neighbours at rest are
+    /// `excluded[excluded_at[s]..excluded_at[s + 1]]`, ascending.
     pub excluded_at: Vec<u32>,
     pub excluded: Vec<u32>,
     /// Each layer's thickness.
@@ -102,15 +118,21 @@ impl std::fmt::Debug for DeviceFind {
 }
 
 /// The pass entry points, in the order a find runs them.
-const PASSES: [&str; 7] = [
-    "centres_pass",
-    "scan_buckets",
-    "scatter_pass",
-    "order_pass",
-    "count_pass",
-    "scan_members",
-    "write_pass",
-];
+fn passes(search: Search) -> [&'static str; 7] {
+    let (count, write) = match search {
+        Search::Faces => ("count_pass", "write_pass"),
+        Search::Edges => ("count_edges", "write_edges"),
+    };
+    [
+        "centres_pass",
+        "scan_buckets",
+        "scatter_pass",
+        "order_pass",
+        count,
+        "scan_queries",
+        write,
+    ]
+}
 
 fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
     ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -125,6 +147,7 @@ impl DeviceFind {
     pub fn new(ctx: Arc<GpuContext>, setup: &FindSetup) -> Result<Self, GpuError> {
         let members = setup.layers.len() as u32;
         let triangles = setup.tris.len() as u32;
+        let queries = setup.excluded_at.len().saturating_sub(1) as u32;
         let buckets = (2 * triangles).next_power_of_two().max(256);
         // The topology in one buffer: layers, triangles, excluded lists, thicknesses, flags.
         let mut topo = setup.layers.clone();
@@ -137,9 +160,10 @@ impl DeviceFind {
         topo.extend(setup.thickness.iter().map(|t| t.to_bits()));
         let flags_at = topo.len() as u32;
         topo.resize(topo.len() + members as usize, 0);
-        let capacity = (4 * members).max(1024);
+        let capacity = (4 * queries).max(1024);
         let uniform = Find {
             members,
+            queries,
             triangles,
             buckets,
             capacity,
@@ -149,7 +173,7 @@ impl DeviceFind {
             flags_at,
             ..Default::default()
         };
-        let scans = u64::from(buckets + members + 2) * 4;
+        let scans = u64::from(buckets + queries + 2) * 4;
         let ctx2 = ctx.clone();
         ctx.scoped("self-collision find", move || {
             use super::Slot::{Storage, Uniform};
@@ -160,7 +184,7 @@ impl DeviceFind {
                 &ctx2.device,
                 "self-collision find",
                 SHADER,
-                PASSES,
+                passes(setup.search),
                 &[
                     Uniform { dynamic: false },
                     read,
@@ -172,7 +196,7 @@ impl DeviceFind {
                     write,
                 ],
             );
-            let params = buffer(&ctx2, "find params", 48, U::UNIFORM | U::COPY_DST);
+            let params = buffer(&ctx2, "find params", 64, U::UNIFORM | U::COPY_DST);
             let points = buffer(
                 &ctx2,
                 "find points",
@@ -195,7 +219,7 @@ impl DeviceFind {
                 u64::from(capacity) * 4,
                 U::STORAGE | U::COPY_SRC,
             );
-            let out = u64::from(members + 1 + capacity) * 4;
+            let out = u64::from(queries + 1 + capacity) * 4;
             let staging = buffer(&ctx2, "find staging", out, U::MAP_READ | U::COPY_DST);
             let bind_group = Self::bind(
                 &ctx2,
@@ -243,7 +267,7 @@ impl DeviceFind {
     fn grow(&mut self, capacity: u32) -> Result<(), GpuError> {
         use wgpu::BufferUsages as U;
         let ctx = self.ctx.clone();
-        let members = self.uniform.members;
+        let queries = self.uniform.queries;
         let (list, staging) = ctx.scoped("self-collision find", || {
             let list = buffer(
                 &ctx,
@@ -251,7 +275,7 @@ impl DeviceFind {
                 u64::from(capacity) * 4,
                 U::STORAGE | U::COPY_SRC,
             );
-            let out = u64::from(members + 1 + capacity) * 4;
+            let out = u64::from(queries + 1 + capacity) * 4;
             let staging = buffer(&ctx, "find staging", out, U::MAP_READ | U::COPY_DST);
             (list, staging)
         })?;
@@ -273,8 +297,8 @@ impl DeviceFind {
         Ok(())
     }
 
-    /// The candidates of the members at `points` (position, `swept`) with `flags`: member `s`'s
-    /// triangles are `list[at[s]..at[s + 1]]`, in the device's order.
+    /// The candidates, the members at `points` (position, `swept`) with `flags`: query `s`'s
+    /// items are `list[at[s]..at[s + 1]]`, in the device's order.
     pub fn find(
         &mut self,
         shape: FindShape,
@@ -317,7 +341,7 @@ impl DeviceFind {
     fn run(&self, at: &mut Vec<u32>, list: &mut Vec<u32>) -> Result<u32, GpuError> {
         let u = self.uniform;
         let base = u64::from(u.buckets + 1) * 4;
-        let at_bytes = u64::from(u.members + 1) * 4;
+        let at_bytes = u64::from(u.queries + 1) * 4;
         let list_bytes = u64::from(u.capacity) * 4;
         let mut total = 0;
         super::read_staging(
@@ -334,7 +358,7 @@ impl DeviceFind {
                     });
                     pass.set_bind_group(0, &self.bind_group, &[]);
                     // One invocation per element, or (the scans) one workgroup.
-                    let (t, m) = (Some(u.triangles), Some(u.members));
+                    let (t, m) = (Some(u.triangles), Some(u.queries));
                     let sizes = [t, None, t, Some(u.buckets), m, None, m];
                     for (p, n) in self.passes.iter().zip(sizes) {
                         pass.set_pipeline(p);
@@ -349,8 +373,8 @@ impl DeviceFind {
             },
             |bytes| {
                 let words: &[u32] = bytemuck::cast_slice(bytes);
-                let (starts, found) = words.split_at(u.members as usize + 1);
-                total = starts[u.members as usize];
+                let (starts, found) = words.split_at(u.queries as usize + 1);
+                total = starts[u.queries as usize];
                 at.clear();
                 at.extend_from_slice(starts);
                 list.clear();
