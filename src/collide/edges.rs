@@ -136,11 +136,14 @@ impl CollideStage {
         if self.device.edges.is_some() {
             return self.crossings_on_device(packed, cell);
         }
-        // The midpoints beside their keys, so the search reads them in order.
+        // The midpoints beside their keys, so the search reads them in order, each half
+        // length with its edge's larger `swept` added (what the pair's reach adds for it).
         self.edge_sorted.clear();
         (self.edge_sorted).extend(self.edge_cells.iter().map(|&(_, k)| {
             let (m, r) = self.edge_centres[k as usize];
-            (m, r, k, self.edges[k as usize].layer)
+            let e = &self.edges[k as usize];
+            let swept = self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
+            (m, r + swept, k, e.layer)
         }));
         let mut runs = std::mem::take(&mut self.runs);
         split_runs(
@@ -170,11 +173,14 @@ impl CollideStage {
         inv: &[f64],
         out: &mut Vec<Crossing>,
     ) {
-        let reach_max = self.thickest() + self.reach;
+        // The pair's reach with the thickest layer's thickness: at least the pair's (a hair
+        // over, so rounding never turns away what `crossing` would take).
+        let own = (self.thickest() + self.margin) * (1.0 + 1e-12);
         beside(cells, &self.edge_cells, |run, near| {
             for &(key, s) in run {
                 let e = self.edges[s as usize];
                 let (ms, rs) = self.edge_centres[s as usize];
+                let reach = own + (rs + self.edge_swept(&e)) * (1.0 + 1e-12);
                 let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
                     ..self.edge_excluded_at[s as usize + 1] as usize];
                 // Each pair once, from the first of the two in the sorted order: only the later
@@ -182,19 +188,25 @@ impl CollideStage {
                 let (from, to) = (near[4].start, near[4].end);
                 let from = from + self.edge_cells[from..to].partition_point(|&e| e <= (key, s));
                 let later = std::iter::once(from..to).chain(near[5..].iter().cloned());
-                for &(m, r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
-                    let widest = reach_max + rs + r;
+                for &(m, swept_r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
+                    let widest = reach + swept_r;
                     if (ms - m).length_squared() >= widest * widest
                         || (layer == e.layer && excluded.binary_search(&u).is_ok())
                     {
                         continue;
                     }
-                    if let Some(c) = self.crossing(s, u, (ms, rs), (m, r), x, inv) {
+                    let centre = self.edge_centres[u as usize];
+                    if let Some(c) = self.crossing(s, u, (ms, rs), centre, x, inv) {
                         out.push(c);
                     }
                 }
             }
         });
+    }
+
+    /// The larger `swept` of an edge's ends.
+    fn edge_swept(&self, e: &Edge) -> f64 {
+        self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize])
     }
 
     /// Edge `s` (midpoint and half length `ms`, `rs`) against edge `u` (`m`, `r`), past the
@@ -211,14 +223,13 @@ impl CollideStage {
         x: &[DVec3],
         inv: &[f64],
     ) -> Option<Crossing> {
-        let swept = |e: &Edge| self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
         let held = |e: &Edge| e.at.iter().all(|&i| inv[i as usize] == 0.0);
         let (e, f) = (self.edges[s as usize], self.edges[u as usize]);
         if f.at.iter().any(|i| e.at.contains(i)) || (held(&e) && held(&f)) {
             return None;
         }
         let (t, friction) = self.combine(e.layer, f.layer);
-        let reach = t + self.margin + swept(&e) + swept(&f);
+        let reach = t + self.margin + self.edge_swept(&e) + self.edge_swept(&f);
         if (ms - m).length_squared() >= (reach + rs + r) * (reach + rs + r) {
             return None;
         }

@@ -162,11 +162,14 @@ impl CollideStage {
         use rayon::prelude::*;
         self.cells.par_sort_unstable();
         self.triangle_cells.par_sort_unstable();
-        // The centres beside their keys, so the search reads them in order.
+        // The centres beside their keys, so the search reads them in order, each radius
+        // with its triangle's largest `swept` added (what the pair's reach adds for it).
         self.centres_sorted.clear();
         (self.centres_sorted).extend(self.triangle_cells.iter().map(|&(_, k)| {
             let (m, r) = self.centres[k as usize];
-            (m, r, k, self.triangles[k as usize].layer)
+            let tri = &self.triangles[k as usize];
+            let swept = tri.slots.map(|s| self.swept[s as usize]);
+            (m, r + swept[0].max(swept[1]).max(swept[2]), k, tri.layer)
         }));
         // The particles' cells in runs of whole cells, searched side by side into buffers
         // kept between finds, then joined in the cells' order: the split does not change them.
@@ -188,24 +191,28 @@ impl CollideStage {
     /// The candidates of the particles of `cells` (whole runs of cells) against the
     /// triangles.
     fn faces_of(&self, cells: &[(u64, u32)], x: &[DVec3], inv: &[f64], faces: &mut Vec<Face>) {
-        let reach_max = self.thickest() + self.reach;
+        let own = self.thickest() + self.margin;
         beside(cells, &self.triangle_cells, |run, near| {
             for &(_, s) in run {
                 let (p, lp, _) = self.members[s as usize];
                 let xp = x[p as usize];
                 let excluded = &self.excluded[self.excluded_at[s as usize] as usize
                     ..self.excluded_at[s as usize + 1] as usize];
+                // The pair's reach with the thickest layer's thickness: at least the pair's
+                // (a hair over, so rounding never turns away what `face` would take).
+                let reach = (own + self.swept[s as usize]) * (1.0 + 1e-12);
                 let centres = near.iter().flat_map(|r| &self.centres_sorted[r.clone()]);
-                for &(m, r, k, layer) in centres {
-                    // Within the widest reach of the centre, and not a neighbour at rest, first:
-                    // from the sorted copy and the particle's own list, read in order.
-                    let widest = reach_max + r;
+                for &(m, swept_r, k, layer) in centres {
+                    // Within that reach of the centre, and not a neighbour at rest, first: from
+                    // the sorted copy and the particle's own list, read in order.
+                    let widest = reach + swept_r;
                     if (xp - m).length_squared() >= widest * widest
                         || (layer == lp && excluded.binary_search(&k).is_ok())
                     {
                         continue;
                     }
-                    if let Some(face) = self.face(s, k, (m, r), x, inv) {
+                    let centre = self.centres[k as usize];
+                    if let Some(face) = self.face(s, k, centre, x, inv) {
                         faces.push(face);
                     }
                 }
@@ -252,9 +259,9 @@ impl CollideStage {
         })
     }
 
-    /// Each member's triangles of its own layer (not its own) within twice its thickness at
-    /// rest: the neighbours along the cloth, which never collide. Found once, from the rest
-    /// places, sorted by triangle for each member.
+    /// Each member's triangles of its own layer within twice its thickness at rest (its own
+    /// among them): the neighbours along the cloth, which never collide. Found once, from the
+    /// rest places, sorted by triangle for each member.
     pub(super) fn find_excluded(&mut self) {
         self.excluded.clear();
         self.excluded_at.clear();
@@ -283,10 +290,10 @@ impl CollideStage {
         let mut pairs = Vec::new();
         beside(&members, &triangles, |run, near| {
             for &(_, s) in run {
-                let (p, lp, rp) = self.members[s as usize];
+                let (_, lp, rp) = self.members[s as usize];
                 for &(_, k) in near.iter().flat_map(|r| &triangles[r.clone()]) {
                     let tri = self.triangles[k as usize];
-                    if tri.layer != lp || tri.at.contains(&p) {
+                    if tri.layer != lp {
                         continue;
                     }
                     // Within twice the layer's thickness of the triangle at rest.
