@@ -318,103 +318,64 @@ mod tests {
         }
     }
 
-    fn faces(stage: &CollideStage) -> Vec<(u32, u32, u64, u64, u64)> {
+    /// A candidate's pair, thickness and friction, bit for bit.
+    type Bits = (u32, u32, u64, u64, u64);
+
+    fn bits(a: u32, b: u32, thickness: f64, (mu, mu_s): (f64, f64)) -> Bits {
+        let [t, mu, mu_s] = [thickness, mu, mu_s].map(f64::to_bits);
+        (a, b, t, mu, mu_s)
+    }
+
+    fn faces(stage: &CollideStage) -> Vec<Bits> {
         (stage.faces.iter())
-            .map(|f| {
-                let (mu, mu_s) = f.friction;
-                let bits = [f.thickness, mu, mu_s].map(f64::to_bits);
-                (f.p, f.triangle, bits[0], bits[1], bits[2])
-            })
+            .map(|f| bits(f.p, f.triangle, f.thickness, f.friction))
             .collect()
     }
 
-    /// The device's lists hold every candidate the CPU finds and nothing past a reach wider by
-    /// far more than the slack; tested again and ordered on the host, they are the CPU's
-    /// candidates in the CPU's order, the same bits; two finds give the same lists.
-    #[test]
-    fn the_device_finds_what_the_cpu_finds() {
-        let Some(ctx) = context() else { return };
-        let (mut stage, packed) = crumpled();
-        let pairs = |s: &CollideStage| -> HashSet<(u32, u32)> {
-            s.faces.iter().map(|f| (f.p, f.triangle)).collect()
-        };
-        stage.find_faces(&packed).unwrap();
-        let cpu = faces(&stage);
-        let found = pairs(&stage);
-        let (margin, reach) = (stage.margin, stage.reach);
-        stage.margin += 1e-4;
-        stage.reach += 1e-4;
-        stage.find_faces(&packed).unwrap();
-        let wide = pairs(&stage);
-        (stage.margin, stage.reach) = (margin, reach);
-        stage.enable_device(ctx).unwrap();
-        stage.find_faces(&packed).unwrap();
-        let lists = stage.device_lists();
-        let device: HashSet<(u32, u32)> = lists.iter().copied().collect();
-        println!(
-            "candidates: {} on the CPU, {} on the device, {} within 0.1 mm more",
-            found.len(),
-            device.len(),
-            wide.len()
-        );
-        assert!(found.len() > 1000, "{}", found.len());
-        assert_eq!(device.len(), lists.len(), "a pair listed twice");
-        let missing: Vec<_> = found.difference(&device).collect();
-        assert!(missing.is_empty(), "the device missed {missing:?}");
-        let extra: Vec<_> = device.difference(&wide).collect();
-        assert!(
-            extra.is_empty(),
-            "the device found past the slack: {extra:?}"
-        );
-        assert_eq!(faces(&stage), cpu);
-        stage.find_faces(&packed).unwrap();
-        assert_eq!(stage.device_lists(), lists);
-    }
-
-    fn crossings(stage: &CollideStage) -> Vec<(u32, u32, u64, u64, u64)> {
+    fn crossings(stage: &CollideStage) -> Vec<Bits> {
         (stage.crossings.iter())
-            .map(|c| {
-                let (mu, mu_s) = c.friction;
-                let bits = [c.thickness, mu, mu_s].map(f64::to_bits);
-                (c.a, c.b, bits[0], bits[1], bits[2])
-            })
+            .map(|c| bits(c.a, c.b, c.thickness, c.friction))
             .collect()
     }
 
-    /// As above, of edges against edges: the device lists each pair both ways, the CPU once.
-    #[test]
-    fn the_device_finds_the_edges_the_cpu_finds() {
+    /// One search (`find`, whose candidates `of` gives) on the CPU, then on the device: the
+    /// device's lists (each pair as `pair` names it, `listed` times) hold every pair the CPU
+    /// finds and none past a reach 0.1 mm wider, far more than the slack; tested again and
+    /// ordered on the host they are the CPU's candidates in the CPU's order, the same bits;
+    /// two finds give the same lists.
+    fn parity(
+        find: impl Fn(&mut CollideStage, &Packed),
+        of: impl Fn(&CollideStage) -> Vec<Bits>,
+        pair: impl Fn((u32, u32)) -> (u32, u32),
+        listed: usize,
+    ) {
         let Some(ctx) = context() else { return };
         let (mut stage, packed) = crumpled();
         let pairs = |s: &CollideStage| -> HashSet<(u32, u32)> {
-            let once = |c: &Crossing| (c.a.min(c.b), c.a.max(c.b));
-            s.crossings.iter().map(once).collect()
+            of(s).into_iter().map(|c| pair((c.0, c.1))).collect()
         };
-        stage.find_crossings(&packed).unwrap();
-        let cpu = crossings(&stage);
-        let found = pairs(&stage);
+        find(&mut stage, &packed);
+        let (cpu, found) = (of(&stage), pairs(&stage));
         let (margin, reach) = (stage.margin, stage.reach);
-        stage.margin += 1e-4;
-        stage.reach += 1e-4;
-        stage.find_crossings(&packed).unwrap();
+        (stage.margin, stage.reach) = (margin + 1e-4, reach + 1e-4);
+        find(&mut stage, &packed);
         let wide = pairs(&stage);
         (stage.margin, stage.reach) = (margin, reach);
         stage.enable_device(ctx).unwrap();
-        stage.find_crossings(&packed).unwrap();
+        find(&mut stage, &packed);
         let lists = stage.device_lists();
-        let device: HashSet<(u32, u32)> =
-            lists.iter().map(|&(s, u)| (s.min(u), s.max(u))).collect();
+        let device: HashSet<(u32, u32)> = lists.iter().map(|&p| pair(p)).collect();
         println!(
-            "edge pairs: {} on the CPU, {} on the device, {} within 0.1 mm more",
+            "{} on the CPU, {} on the device, {} within 0.1 mm more",
             found.len(),
             device.len(),
             wide.len()
         );
         assert!(found.len() > 1000, "{}", found.len());
         assert_eq!(
-            2 * device.len(),
+            listed * device.len(),
             lists.len(),
-            "a pair not listed both ways, or twice"
+            "a pair listed too often"
         );
         let missing: Vec<_> = found.difference(&device).collect();
         assert!(missing.is_empty(), "the device missed {missing:?}");
@@ -423,8 +384,21 @@ mod tests {
             extra.is_empty(),
             "the device found past the slack: {extra:?}"
         );
-        assert_eq!(crossings(&stage), cpu);
-        stage.find_crossings(&packed).unwrap();
+        assert_eq!(of(&stage), cpu);
+        find(&mut stage, &packed);
         assert_eq!(stage.device_lists(), lists);
+    }
+
+    /// Particles against triangles: each pair listed once.
+    #[test]
+    fn the_device_finds_what_the_cpu_finds() {
+        parity(|s, x| s.find_faces(x).unwrap(), faces, |p| p, 1);
+    }
+
+    /// Edges against edges: the device lists each pair both ways, the CPU once.
+    #[test]
+    fn the_device_finds_the_edges_the_cpu_finds() {
+        let once = |(a, b): (u32, u32)| (a.min(b), a.max(b));
+        parity(|s, x| s.find_crossings(x).unwrap(), crossings, once, 2);
     }
 }

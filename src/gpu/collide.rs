@@ -143,6 +143,16 @@ fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -
     })
 }
 
+/// The list of `capacity` candidates and its read-back (the queries' starts, then the list).
+fn lists(ctx: &GpuContext, queries: u32, capacity: u32) -> (wgpu::Buffer, wgpu::Buffer) {
+    use wgpu::BufferUsages as U;
+    let bytes = u64::from(capacity) * 4;
+    let list = buffer(ctx, "find list", bytes, U::STORAGE | U::COPY_SRC);
+    let out = u64::from(queries + 1) * 4 + bytes;
+    let staging = buffer(ctx, "find staging", out, U::MAP_READ | U::COPY_DST);
+    (list, staging)
+}
+
 impl DeviceFind {
     pub fn new(ctx: Arc<GpuContext>, setup: &FindSetup) -> Result<Self, GpuError> {
         let members = setup.layers.len() as u32;
@@ -213,14 +223,7 @@ impl DeviceFind {
             let counts = buffer(&ctx2, "find counts", scans, U::STORAGE | U::COPY_DST);
             let starts = buffer(&ctx2, "find starts", scans, U::STORAGE | U::COPY_SRC);
             let sorted = buffer(&ctx2, "find sorted", u64::from(triangles) * 4, U::STORAGE);
-            let list = buffer(
-                &ctx2,
-                "find list",
-                u64::from(capacity) * 4,
-                U::STORAGE | U::COPY_SRC,
-            );
-            let out = u64::from(queries + 1 + capacity) * 4;
-            let staging = buffer(&ctx2, "find staging", out, U::MAP_READ | U::COPY_DST);
+            let (list, staging) = lists(&ctx2, queries, capacity);
             let bind_group = Self::bind(
                 &ctx2,
                 &layout,
@@ -265,20 +268,10 @@ impl DeviceFind {
 
     /// Room for `capacity` candidates in the list (and its read-back).
     fn grow(&mut self, capacity: u32) -> Result<(), GpuError> {
-        use wgpu::BufferUsages as U;
         let ctx = self.ctx.clone();
         let queries = self.uniform.queries;
-        let (list, staging) = ctx.scoped("self-collision find", || {
-            let list = buffer(
-                &ctx,
-                "find list",
-                u64::from(capacity) * 4,
-                U::STORAGE | U::COPY_SRC,
-            );
-            let out = u64::from(queries + 1 + capacity) * 4;
-            let staging = buffer(&ctx, "find staging", out, U::MAP_READ | U::COPY_DST);
-            (list, staging)
-        })?;
+        let (list, staging) =
+            ctx.scoped("self-collision find", || lists(&ctx, queries, capacity))?;
         self.bind_group = Self::bind(
             &ctx,
             &self.layout,
