@@ -19,8 +19,10 @@
 //! thickness), a Verlet list: found at a frame's start and again whenever a member has moved
 //! more than half the margin since, less the members' mean move. They are found from members
 //! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
-//! substep run in one fixed order: the same on any number of threads. What the pushes and
-//! friction do to `E` is booked on [`crate::EnergyAudit::contacts`].
+//! substep run in one fixed order: the same on any number of threads. With the springs on the
+//! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
+//! (`device.rs`), so both back ends pass the same ones. What the pushes and friction do to `E`
+//! is booked on [`crate::EnergyAudit::contacts`].
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -250,7 +252,8 @@ pub(crate) struct CollideStage {
     resume: bool,
     /// The change of `E` the pushes and friction made this frame (J).
     pub(crate) energy: f64,
-    /// The search against triangles on the device, where the springs run there.
+    /// The searches on the device (against triangles, and of edges), where the springs run
+    /// there; none after a gather until `enable_device`.
     #[cfg(feature = "gpu")]
     device: device::OnDevice,
 }
@@ -315,7 +318,7 @@ impl CollideStage {
         self.rebuilds = 0;
         #[cfg(feature = "gpu")]
         {
-            self.device.find = None;
+            (self.device.find, self.device.edges) = (None, None);
         }
         // The same particles collide as before the game's edit: the next frame's first test
         // sweeps from where this stage left them.
@@ -326,7 +329,7 @@ impl CollideStage {
         self.members.is_empty()
     }
 
-    /// Whether the candidates against triangles are found on the device.
+    /// Whether the candidates are found on the device.
     pub(crate) fn finds_on_device(&self) -> bool {
         #[cfg(feature = "gpu")]
         return self.device.find.is_some();
