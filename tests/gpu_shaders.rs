@@ -21,19 +21,26 @@ fn shader_files() -> Vec<PathBuf> {
 }
 
 /// The step's shaders, which the prelude goes before.
-const STEP_SHADERS: [&str; 5] = [
+const STEP_SHADERS: [&str; 6] = [
     "integrate.wgsl",
     "contacts.wgsl",
     "tethers.wgsl",
     "air.wgsl",
     "collide.wgsl",
+    "collide_pass.wgsl",
 ];
 
-/// A shader file as the engine assembles it: the prelude first for a step shader.
+/// Self-collision's shaders, which the triangle queries go before (after the prelude).
+const TRIANGLE_SHADERS: [&str; 2] = ["collide.wgsl", "collide_pass.wgsl"];
+
+/// A shader file as the engine assembles it: the prelude first for a step shader, then the
+/// triangle queries for self-collision's.
 fn assembled(name: &str) -> String {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
     let read = |f: &str| std::fs::read_to_string(dir.join(f)).expect("readable shader");
-    if STEP_SHADERS.contains(&name) {
+    if TRIANGLE_SHADERS.contains(&name) {
+        read("prelude.wgsl") + &read("triangle.wgsl") + &read(name)
+    } else if STEP_SHADERS.contains(&name) {
         read("prelude.wgsl") + &read(name)
     } else {
         read(name)
@@ -64,8 +71,8 @@ fn every_shader_parses_and_validates() {
         checked += 1;
     }
     assert_eq!(
-        checked, 6,
-        "integrate, contacts, render, tethers, air and collide"
+        checked, 8,
+        "integrate, contacts, render, tethers, air, collide, collide_pass and triangle"
     );
 }
 
@@ -76,6 +83,7 @@ fn the_embedded_shaders_are_the_prelude_and_the_files() {
     assert_eq!(gpu::tethers::SHADER, assembled("tethers.wgsl"));
     assert_eq!(gpu::air::SHADER, assembled("air.wgsl"));
     assert_eq!(gpu::collide::SHADER, assembled("collide.wgsl"));
+    assert_eq!(gpu::collide_pass::SHADER, assembled("collide_pass.wgsl"));
     assert!(gpu::SHADER.starts_with(gpu::PRELUDE));
     // One definition: no step shader declares what the prelude does.
     for name in STEP_SHADERS {
@@ -251,6 +259,22 @@ fn pod_mirrors_match_the_wgsl_layouts() {
         }
     );
     check_layout!(&collide_module, [collide] Centre { m, cell });
+    let pass_module = parse("collide_pass.wgsl");
+    check_layout!(&pass_module, [collide_pass] PassStep { colours, particles, settles, one });
+    check_layout!(
+        &pass_module,
+        [collide_pass] Contact {
+            p,
+            a,
+            b,
+            c,
+            thickness,
+            mu,
+            mu_s,
+            _pad
+        }
+    );
+    check_layout!(&pass_module, [collide_pass] Active { n, weights });
     // The override constants the solver sets exist in the shader.
     let overrides: Vec<_> = module
         .overrides

@@ -301,7 +301,7 @@ fn a_sheet_rests_at_the_thickness_beside_the_gpu_springs() {
         sim.step().unwrap();
         let schedule = sim.schedule().to_string();
         assert!(
-            schedule.contains("self-collision (its candidates found on the GPU)"),
+            schedule.contains("self-collision (on the GPU)"),
             "{schedule}"
         );
         for _ in 0..180 {

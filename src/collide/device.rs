@@ -20,6 +20,8 @@ pub(super) struct OnDevice {
     pub(super) find: Option<DeviceFind>,
     /// Edges against edges, where a layer asks for them.
     pub(super) edges: Option<DeviceFind>,
+    /// The pass over the candidates, where every candidate is a particle against a triangle.
+    pub(super) pass: Option<super::device_pass::OnDevicePass>,
     points: Vec<[f32; 4]>,
     flags: Vec<u32>,
     at: Vec<u32>,
@@ -221,7 +223,7 @@ impl CollideStage {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use std::collections::HashSet;
 
     use glam::DVec3;
@@ -231,7 +233,7 @@ mod tests {
 
     /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
     /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
-    fn crumpled() -> (CollideStage, Packed) {
+    pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
         let mut stage = CollideStage::default();
         let mut r = super::super::uniform(11);
         let (n, spacing) = (24usize, 0.02);
@@ -304,7 +306,7 @@ mod tests {
 
     /// The shared context, or `None` where there is no adapter at all (a skip only when
     /// `HARMONIC_REQUIRE_GPU` is unset).
-    fn context() -> Option<Arc<GpuContext>> {
+    pub(in crate::collide) fn context() -> Option<Arc<GpuContext>> {
         match GpuContext::shared(true) {
             Ok(c) => Some(c),
             Err(e) => {

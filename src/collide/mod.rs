@@ -21,8 +21,11 @@
 //! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
 //! substep run in one fixed order: the same on any number of threads. With the springs on the
 //! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
-//! (`device.rs`), so both back ends pass the same ones. What the pushes and friction do to `E`
-//! is booked on [`crate::EnergyAudit::contacts`].
+//! (`device.rs`), so both back ends pass the same ones; where every candidate is a particle
+//! against a triangle and no host contact stage runs, the device runs the pass too, in colours
+//! (`colours.rs`, `device_pass.rs`). What the pushes and friction do to `E` is booked on
+//! [`crate::EnergyAudit::contacts`] (on the device, left in the residual, as the device's
+//! contacts leave theirs).
 
 use glam::DVec3;
 use hecs::{Entity, World};
@@ -32,9 +35,12 @@ use crate::buffers::Packed;
 use crate::components::{Particle, SceneIndex};
 use crate::error::GpuError;
 
+mod colours;
 mod contact;
 #[cfg(feature = "gpu")]
 mod device;
+#[cfg(feature = "gpu")]
+mod device_pass;
 mod edges;
 mod search;
 
@@ -48,7 +54,7 @@ const GROUNDED: f64 = 0.1;
 const EDIT_REACH: f64 = 10.0;
 
 /// Passes over the pushed contacts' velocities each substep (the first with the pushes).
-const VELOCITY_PASSES: usize = 4;
+pub(crate) const VELOCITY_PASSES: usize = 4;
 
 /// Seeded numbers uniform in [−1, 1) for the module's tests (a linear congruential
 /// generator's top 53 bits).
@@ -216,6 +222,9 @@ pub(crate) struct CollideStage {
     edge_excluded: Vec<u32>,
     edge_excluded_at: Vec<u32>,
     crossings: Vec<edges::Crossing>,
+    /// Whether the pass takes them in colours (the device's order), and the colours.
+    coloured: bool,
+    colours: colours::Colours,
     /// As `triangle_cells`, `centres` and `centres_sorted`, of the edges' midpoints.
     edge_cells: Vec<(u64, u32)>,
     edge_centres: Vec<(DVec3, f64)>,
@@ -315,11 +324,13 @@ impl CollideStage {
         self.pairs.clear();
         self.faces.clear();
         self.crossings.clear();
+        self.colours = Default::default();
         self.rebuilds = 0;
         #[cfg(feature = "gpu")]
         {
-            (self.device.find, self.device.edges) = (None, None);
+            (self.device.find, self.device.edges, self.device.pass) = (None, None, None);
         }
+        self.coloured = false;
         // The same particles collide as before the game's edit: the next frame's first test
         // sweeps from where this stage left them.
         self.resume = stepped && before.iter().copied().eq(self.members.iter().map(|m| m.0));
@@ -337,11 +348,21 @@ impl CollideStage {
         false
     }
 
+    /// Whether the pass over the candidates runs on the device.
+    pub(crate) fn passes_on_device(&self) -> bool {
+        #[cfg(feature = "gpu")]
+        return self.device.pass.is_some();
+        #[cfg(not(feature = "gpu"))]
+        false
+    }
+
     /// A frame's start: its books opened, and the candidates found again from its state (the
     /// game may have moved particles since the last frame), which is the first substep's
     /// start.
     pub(crate) fn begin_frame(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.energy = 0.0;
+        #[cfg(feature = "gpu")]
+        self.start_from_device()?;
         self.swept.clear();
         self.swept.resize(self.members.len(), 0.0);
         if std::mem::take(&mut self.resume) {
@@ -349,7 +370,10 @@ impl CollideStage {
         } else {
             self.keep_start(packed);
         }
-        self.rebuild(packed)
+        self.rebuild(packed)?;
+        #[cfg(feature = "gpu")]
+        self.start_to_device();
+        Ok(())
     }
 
     /// After the game moved particles between frames (through the World): the first substep
@@ -443,6 +467,11 @@ impl CollideStage {
         self.find_pairs(packed);
         self.find_faces(packed)?;
         self.find_crossings(packed)?;
+        if self.coloured {
+            self.colour(x.len());
+            #[cfg(feature = "gpu")]
+            self.upload_pass()?;
+        }
         Ok(())
     }
 
@@ -464,6 +493,14 @@ impl CollideStage {
         gravity: DVec3,
     ) -> Result<bool, GpuError> {
         self.refresh(packed)?;
+        let any = self.pass(packed, gravity);
+        self.keep_start(packed);
+        Ok(any)
+    }
+
+    /// The pass over the candidates (in colours where the device runs it), the particles' own
+    /// energy change booked; whether any moved.
+    fn pass(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
         let n = self.moves.moved.len();
         self.moves.reset(n);
         let mut any = false;
@@ -485,16 +522,25 @@ impl CollideStage {
             active: &mut self.active,
         };
         touch.active.clear();
-        for &(a, b, t, friction) in &self.pairs {
-            any |= touch.points(a as usize, b as usize, t, friction);
-        }
-        for f in &self.faces {
-            let at = self.triangles[f.triangle as usize].at;
-            any |= touch.face(f.p as usize, at, &self.start, f.thickness, f.friction);
-        }
-        for c in &self.crossings {
-            let [e, f] = [c.a, c.b].map(|k| self.edges[k as usize].at.map(|i| i as usize));
-            any |= touch.edges(e, f, &self.start, c.thickness, c.friction);
+        let (np, nf) = (self.pairs.len(), self.faces.len());
+        let mut push = |k: usize| {
+            any |= if k < np {
+                let (a, b, t, friction) = self.pairs[k];
+                touch.points(a as usize, b as usize, t, friction)
+            } else if k < np + nf {
+                let f = &self.faces[k - np];
+                let at = self.triangles[f.triangle as usize].at;
+                touch.face(f.p as usize, at, &self.start, f.thickness, f.friction)
+            } else {
+                let c = &self.crossings[k - np - nf];
+                let [e, f] = [c.a, c.b].map(|k| self.edges[k as usize].at.map(|i| i as usize));
+                touch.edges(e, f, &self.start, c.thickness, c.friction)
+            };
+        };
+        if self.coloured {
+            self.colours.order.iter().for_each(|&k| push(k as usize));
+        } else {
+            (0..np + nf + self.crossings.len()).for_each(push);
         }
         for _ in 1..VELOCITY_PASSES {
             touch.settle();
@@ -502,8 +548,7 @@ impl CollideStage {
         if any {
             (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
         }
-        self.keep_start(packed);
-        Ok(any)
+        any
     }
 
     /// The particles the colliders' contacts moved in the last substep (`touched`, packed

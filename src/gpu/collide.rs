@@ -13,10 +13,11 @@ use bytemuck::{Pod, Zeroable};
 use super::GpuContext;
 use crate::error::GpuError;
 
-/// The WGSL source of the find's passes: the prelude ([`super::PRELUDE`]), then
-/// `shaders/collide.wgsl`.
+/// The WGSL source of the find's passes: the prelude ([`super::PRELUDE`]), the triangle
+/// queries (`shaders/triangle.wgsl`), then `shaders/collide.wgsl`.
 pub const SHADER: &str = concat!(
     include_str!("../../shaders/prelude.wgsl"),
+    include_str!("../../shaders/triangle.wgsl"),
     include_str!("../../shaders/collide.wgsl")
 );
 

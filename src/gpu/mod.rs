@@ -46,6 +46,7 @@ use upload::*;
 
 pub mod air;
 pub mod collide;
+pub mod collide_pass;
 pub mod contacts;
 pub mod tethers;
 

@@ -277,6 +277,25 @@ impl GpuSolver {
     }
 
     /// The contact stage on the device, when enabled.
+    /// Self-collision's pass over the state's buffers (none before the first upload).
+    pub fn collide_pass(
+        &self,
+        particles: u32,
+        settles: u32,
+    ) -> Result<Option<super::collide_pass::DevicePass>, GpuError> {
+        let Some(b) = &self.buffers else {
+            return Ok(None);
+        };
+        let pass = super::collide_pass::DevicePass::new(
+            self.ctx.clone(),
+            &b.pos,
+            &b.vel,
+            particles,
+            settles,
+        )?;
+        Ok(Some(pass))
+    }
+
     pub fn contacts(&mut self) -> Option<&mut contacts::DeviceContacts> {
         self.contacts.as_mut()
     }

@@ -186,18 +186,20 @@ pub struct Stage {
 
 impl Stage {
     /// Whether the stage needs the state on the host between substeps: a CPU stage in a frame
-    /// whose springs run on the device (the state then goes back and forth every substep). The
-    /// quarantine only checks the state where it is on the host anyway.
+    /// whose springs run on the device (the state then goes back and forth every substep), and
+    /// self-collision wherever its pass runs (the host decides each substep whether to find
+    /// the candidates again). The quarantine only checks the state where it is on the host
+    /// anyway.
     pub fn needs_host_state(&self) -> bool {
-        self.on == Backend::Cpu
+        let host = self.on == Backend::Cpu
             && matches!(
                 self.kind,
                 StageKind::Drive
                     | StageKind::Tethers
                     | StageKind::StretchLimit
-                    | StageKind::SelfCollision
                     | StageKind::Contacts
-            )
+            );
+        host || self.kind == StageKind::SelfCollision
     }
 }
 
@@ -229,9 +231,9 @@ pub(crate) struct Needs {
     pub(crate) stretch: bool,
     /// Cloths tear.
     pub(crate) tearing: bool,
-    /// Cloths collide with themselves and each other: where the candidates are found (the
-    /// pass over them runs on the host).
-    pub(crate) collide: Option<Backend>,
+    /// Cloths collide with themselves and each other: where the candidates are found, and
+    /// where the pass over them runs.
+    pub(crate) collide: Option<(Backend, Backend)>,
     pub(crate) integrator: Integrator,
     pub(crate) substeps: u32,
     /// Where the springs run.
@@ -270,8 +272,8 @@ impl Schedule {
         if n.stretch {
             push(StageKind::StretchLimit, Backend::Cpu);
         }
-        if n.collide.is_some() {
-            push(StageKind::SelfCollision, Backend::Cpu);
+        if let Some((_, on)) = n.collide {
+            push(StageKind::SelfCollision, on);
         }
         if let Some(on) = n.contacts_on {
             push(StageKind::Contacts, on);
@@ -283,7 +285,7 @@ impl Schedule {
         self.integrator = Some(n.integrator);
         self.substeps = n.substeps;
         self.device_per_substep = n.device_contacts_per_substep;
-        self.finds_on_device = n.collide == Some(Backend::Gpu);
+        self.finds_on_device = n.collide.is_some_and(|c| c.0 == Backend::Gpu);
     }
 
     /// The stages in the order a frame runs them.
@@ -335,9 +337,13 @@ impl fmt::Display for Schedule {
                         if n == 1 { "" } else { "s" }
                     )?;
                 }
-                (StageKind::Air | StageKind::Contacts | StageKind::Tethers, _) if gpu => {
-                    f.write_str(" (on the GPU)")?
-                }
+                (
+                    StageKind::Air
+                    | StageKind::Contacts
+                    | StageKind::Tethers
+                    | StageKind::SelfCollision,
+                    _,
+                ) if gpu => f.write_str(" (on the GPU)")?,
                 (StageKind::SelfCollision, _) if self.finds_on_device => {
                     f.write_str(" (its candidates found on the GPU)")?
                 }

@@ -532,7 +532,10 @@ impl Simulation {
             air: (!self.air.is_empty()).then_some(on(device_air)),
             tethers: (!self.tethers.is_empty()).then_some(on(device_tethers)),
             stretch: !self.stretch.is_empty(),
-            collide: (!self.collide.is_empty()).then_some(on(self.collide.finds_on_device())),
+            collide: (!self.collide.is_empty()).then_some((
+                on(self.collide.finds_on_device()),
+                on(self.collide.passes_on_device()),
+            )),
             tearing: !self.tear.is_empty(),
             drives: !self.drives.is_empty(),
             integrator: self.config.integrator,

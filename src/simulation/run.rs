@@ -290,6 +290,17 @@ impl Run<'_> {
                 self.host_moved();
                 self.charge(StageKind::StretchLimit);
             }
+            (StageKind::SelfCollision, Backend::Gpu) => {
+                // The places after the springs, for the host's check whether to find again;
+                // the pass then moves the device's state, newer than the host's once more.
+                self.state_to_host()?;
+                #[cfg(feature = "gpu")]
+                if let (Some(c), Some(d)) = (self.collide.as_mut(), self.device.as_mut()) {
+                    c.project_on_device(self.packed)?;
+                    d.device_newer = true;
+                }
+                self.charge(StageKind::SelfCollision);
+            }
             (StageKind::SelfCollision, _) => {
                 self.state_to_host()?;
                 // What the host's contact pass touched (none where the contacts run on the

@@ -460,6 +460,9 @@ impl Simulation {
         self.drives.refresh(&self.packed);
         self.tethers.gather(&self.world, &self.packed);
         self.stretch.gather(&self.world, &self.packed);
+        // The device's pass kept the places the game's edits are swept from.
+        #[cfg(feature = "gpu")]
+        self.collide.start_from_device()?;
         self.collide.gather(&self.world, &self.packed);
         self.tear.gather(&self.world, &self.packed);
         self.solver.invalidate();

@@ -80,9 +80,23 @@ impl Simulation {
     /// there.
     #[cfg(feature = "gpu")]
     pub(super) fn device_collide(&mut self) -> Result<(), SimError> {
-        if let Some(gpu) = &self.gpu {
-            if !self.collide.is_empty() {
-                self.collide.enable_device(gpu.shared_context())?;
+        let Some(gpu) = &self.gpu else {
+            return Ok(());
+        };
+        if self.collide.is_empty() {
+            return Ok(());
+        }
+        self.collide.enable_device(gpu.shared_context())?;
+        // The pass too, unless the host's contact stage runs (its touches weigh the pushes).
+        let host_contacts = match &self.props {
+            Some(_) => !gpu.has_contacts(),
+            None => self.user_stage.is_some(),
+        };
+        if self.collide.pass_fits_device() && !host_contacts {
+            let settles = crate::collide::VELOCITY_PASSES as u32 - 1;
+            let n = self.packed.particle_count() as u32;
+            if let Some(pass) = gpu.collide_pass(n, settles)? {
+                self.collide.enable_device_pass(pass);
             }
         }
         Ok(())
