@@ -1,18 +1,26 @@
 // Self-collision's pass on the device: the twin of `Touch::face`, `Touch::push` and
 // `Touch::settle` in src/collide/contact.rs, run after a substep's springs over the same
 // position and velocity buffers. The contacts come in colours (src/collide/colours.rs): no two
-// of a colour share a particle, so one workgroup takes a colour's side by side and the result
-// is the CPU's Gauss–Seidel over the same order, the same on every run. Then the passes over
-// the pushed contacts' velocities, colour by colour, and each particle's place kept as the
-// next substep's start for the swept test. Host side: src/gpu/collide_pass.rs.
+// of a colour share a particle, so a dispatch takes a colour's side by side, colour after
+// colour, and the result is the CPU's Gauss–Seidel over the same order, the same on every
+// run. Then the passes over the pushed contacts' velocities the same way, and each particle's
+// place kept as the next substep's start for the swept test. Host side:
+// src/gpu/collide_pass.rs.
 
 struct PassStep {
-    // Colours, particles, velocity passes after the first.
-    colours: u32,
     particles: u32,
-    settles: u32,
     // 1.0, read at run time so the compensated sums are not folded away.
     one: f32,
+    _pad0: u32,
+    _pad1: u32,
+}
+
+// A colour's contacts: contacts[first .. end].
+struct Span {
+    first: u32,
+    end: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 // A particle against a triangle's corners, and the pair's thickness and friction.
@@ -40,10 +48,11 @@ struct Active {
 @group(0) @binding(2) var<storage, read_write> vel: array<vec4<f32>>;
 // Each particle's place at the substep's start (xyz).
 @group(0) @binding(3) var<storage, read_write> start: array<vec4<f32>>;
-// In colour order: colour c's are contacts[colour_at[c] .. colour_at[c + 1]].
+// In colour order.
 @group(0) @binding(4) var<storage, read> contacts: array<Contact>;
-@group(0) @binding(5) var<storage, read> colour_at: array<u32>;
-@group(0) @binding(6) var<storage, read_write> pushed: array<Active>;
+@group(0) @binding(5) var<storage, read_write> pushed: array<Active>;
+// The colour a dispatch takes (one per colour, at a dynamic offset).
+@group(0) @binding(6) var<uniform> span: Span;
 
 fn x_of(i: u32) -> vec3<f32> {
     return pos[i].hi.xyz + pos[i].lo.xyz;
@@ -192,24 +201,29 @@ fn settle(k: u32) {
     add_velocity(c.c, -dv * it.z);
 }
 
-// One workgroup: the colours one after another, a colour's contacts side by side.
+// One colour's contacts pushed, side by side.
 @compute @workgroup_size(WORKGROUP)
-fn collide_pass(@builtin(local_invocation_index) t: u32) {
-    for (var c = 0u; c < step.colours; c++) {
-        for (var k = colour_at[c] + t; k < colour_at[c + 1u]; k += WORKGROUP) {
-            face(k);
-        }
-        storageBarrier();
+fn push_colour(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = span.first + linear(id, groups);
+    if k < span.end {
+        face(k);
     }
-    for (var s = 0u; s < step.settles; s++) {
-        for (var c = 0u; c < step.colours; c++) {
-            for (var k = colour_at[c] + t; k < colour_at[c + 1u]; k += WORKGROUP) {
-                settle(k);
-            }
-            storageBarrier();
-        }
+}
+
+// One colour's pushed contacts' velocities settled, side by side.
+@compute @workgroup_size(WORKGROUP)
+fn settle_colour(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let k = span.first + linear(id, groups);
+    if k < span.end {
+        settle(k);
     }
-    for (var i = t; i < step.particles; i += WORKGROUP) {
+}
+
+// Each particle's place kept as the next substep's start.
+@compute @workgroup_size(WORKGROUP)
+fn keep_start(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = linear(id, groups);
+    if i < step.particles {
         start[i] = vec4(x_of(i), 0.0);
     }
 }

@@ -99,6 +99,28 @@ fn the_stack_never_crosses_itself_or_another() {
     assert_eq!(with, 0);
 }
 
+/// The stack with the springs, the search and the pass over the candidates on the GPU (its
+/// colliders are cuboids, so the contacts run there too): no triangles cross at any frame's
+/// end, as on the CPU.
+#[test]
+fn the_stack_never_crosses_on_the_gpu() {
+    if common::gpu_or_skip(harmonic::internals::gpu::GpuContext::shared(true)).is_none() {
+        return;
+    }
+    let mut scene = shipped("cloth_stack.ron");
+    scene.backend = Some("gpu".into());
+    let mut sim = Simulation::from_scene(&scene).unwrap();
+    sim.step().unwrap();
+    let schedule = sim.schedule().to_string();
+    assert!(
+        schedule.contains("self-collision (on the GPU)"),
+        "{schedule}"
+    );
+    let with = most_crossing(&scene, 180);
+    println!("gpu: most crossing pairs at a frame's end: {with}");
+    assert_eq!(with, 0);
+}
+
 /// `scenes/ring_pull.ron`: a tablecloth pulled through a ring bunches into folds pressed
 /// through it, edges against edges (`edges: true`), 12 mm thick: no two triangles sharing no
 /// corner cross at any frame's end. Without self-collision thousands do.

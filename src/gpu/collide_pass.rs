@@ -1,8 +1,8 @@
 //! Self-collision's pass on the device (`shaders/collide_pass.wgsl`), the twin of the CPU's
 //! pass over the particle-against-triangle candidates in colour order (`project` in
-//! `src/collide/mod.rs` with its colours, `src/collide/colours.rs`): one workgroup runs the
-//! colours one after another over the springs' position and velocity buffers, so the result
-//! is the same on every run. The host uploads the candidates at each find and the substep's
+//! `src/collide/mod.rs` with its colours, `src/collide/colours.rs`): a dispatch per colour,
+//! one after another in one compute pass over the springs' position and velocity buffers, so
+//! the result is the same on every run. The host uploads the candidates at each find and the substep's
 //! start places at a frame's start; the shader keeps those after each pass.
 
 use std::sync::Arc;
@@ -24,10 +24,20 @@ pub const SHADER: &str = concat!(
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PassStep {
-    pub colours: u32,
     pub particles: u32,
-    pub settles: u32,
     pub one: f32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+
+/// `Span` in shaders/collide_pass.wgsl: a colour's contacts, `first..end`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Span {
+    pub first: u32,
+    pub end: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
 }
 
 /// `Contact` in shaders/collide_pass.wgsl: particle `p` against the triangle `a`, `b`, `c`
@@ -53,29 +63,40 @@ pub struct Active {
     pub weights: [f32; 4],
 }
 
+/// The buffers that grow with the candidates: the contacts, what each pushed, the spans.
+struct Lists {
+    contacts: wgpu::Buffer,
+    active: wgpu::Buffer,
+    spans: wgpu::Buffer,
+}
+
 /// The pass of one gather over the springs' buffers.
 pub struct DevicePass {
     ctx: Arc<GpuContext>,
     layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::ComputePipeline,
+    /// `push_colour`, `settle_colour`, `keep_start`.
+    pipelines: [wgpu::ComputePipeline; 3],
     bind_group: wgpu::BindGroup,
     step: wgpu::Buffer,
     pos: wgpu::Buffer,
     vel: wgpu::Buffer,
     start: wgpu::Buffer,
-    contacts: wgpu::Buffer,
-    colour_at: wgpu::Buffer,
-    active: wgpu::Buffer,
+    lists: Lists,
     staging: wgpu::Buffer,
-    uniform: PassStep,
-    /// Contacts and colours the buffers have room for.
+    particles: u32,
+    settles: u32,
+    /// Each colour's contacts, as uploaded; the spans' dynamic-offset stride.
+    colours: Vec<Span>,
+    stride: u32,
+    /// Contacts and colours the lists have room for.
     room: (u32, u32),
 }
 
 impl std::fmt::Debug for DevicePass {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("DevicePass")
-            .field("step", &self.uniform)
+            .field("particles", &self.particles)
+            .field("colours", &self.colours.len())
             .finish()
     }
 }
@@ -103,85 +124,96 @@ impl DevicePass {
     ) -> Result<Self, GpuError> {
         let ctx2 = ctx.clone();
         let (pos, vel) = (pos.clone(), vel.clone());
+        // Dynamic offsets are multiples of the alignment, each holding a Span.
+        let stride = ctx.limits.min_uniform_buffer_offset_alignment.max(16);
         ctx.scoped("self-collision pass", move || {
             use super::Slot::{Storage, Uniform};
             let (write, read) = (Storage { read_only: false }, Storage { read_only: true });
-            let (layout, pipeline) = super::stage_pipeline(
+            let (layout, pipelines) = super::stage_pipelines(
                 &ctx2.device,
                 "self-collision pass",
                 SHADER,
-                "collide_pass",
+                ["push_colour", "settle_colour", "keep_start"],
                 &[
                     Uniform { dynamic: false },
                     write,
                     write,
                     write,
                     read,
-                    read,
                     write,
+                    Uniform { dynamic: true },
                 ],
             );
-            let step = buffer(&ctx2, "pass step", 16, U::UNIFORM | U::COPY_DST);
+            let uniform = PassStep {
+                particles,
+                one: 1.0,
+                ..PassStep::default()
+            };
+            let step = super::init_buffer(
+                &ctx2.device,
+                "pass step",
+                bytemuck::bytes_of(&uniform),
+                U::UNIFORM,
+            );
+            let bytes = u64::from(particles) * 16;
             let start = buffer(
                 &ctx2,
                 "pass start",
-                u64::from(particles) * 16,
+                bytes,
                 U::STORAGE | U::COPY_DST | U::COPY_SRC,
             );
-            let staging = buffer(
-                &ctx2,
-                "pass staging",
-                u64::from(particles) * 16,
-                U::MAP_READ | U::COPY_DST,
-            );
-            let (contacts, colour_at, active) = Self::lists(&ctx2, (0, 0));
-            let uniform = PassStep {
-                colours: 0,
-                particles,
-                settles,
-                one: 1.0,
-            };
+            let staging = buffer(&ctx2, "pass staging", bytes, U::MAP_READ | U::COPY_DST);
+            let lists = Self::lists(&ctx2, (0, 0), stride);
             Self {
                 ctx: ctx2.clone(),
-                bind_group: Self::bind(
-                    &ctx2,
-                    &layout,
-                    [&step, &pos, &vel, &start, &contacts, &colour_at, &active],
-                ),
+                bind_group: Self::bind(&ctx2, &layout, [&step, &pos, &vel, &start], &lists),
                 layout,
-                pipeline,
+                pipelines,
                 step,
                 pos,
                 vel,
                 start,
-                contacts,
-                colour_at,
-                active,
+                lists,
                 staging,
-                uniform,
+                particles,
+                settles,
+                colours: Vec::new(),
+                stride,
                 room: (0, 0),
             }
         })
     }
 
-    fn lists(ctx: &GpuContext, (n, c): (u32, u32)) -> (wgpu::Buffer, wgpu::Buffer, wgpu::Buffer) {
-        let storage = U::STORAGE | U::COPY_DST;
-        (
-            buffer(ctx, "pass contacts", u64::from(n.max(1)) * 32, storage),
-            buffer(ctx, "pass colours", u64::from(c + 1) * 4, storage),
-            buffer(ctx, "pass active", u64::from(n.max(1)) * 32, U::STORAGE),
-        )
+    /// Room for `n` contacts in `c` colours.
+    fn lists(ctx: &GpuContext, (n, c): (u32, u32), stride: u32) -> Lists {
+        let n = u64::from(n.max(1));
+        let spans = u64::from(c.max(1)) * u64::from(stride);
+        Lists {
+            contacts: buffer(ctx, "pass contacts", n * 32, U::STORAGE | U::COPY_DST),
+            active: buffer(ctx, "pass active", n * 32, U::STORAGE),
+            spans: buffer(ctx, "pass spans", spans, U::UNIFORM | U::COPY_DST),
+        }
     }
 
     fn bind(
         ctx: &GpuContext,
         layout: &wgpu::BindGroupLayout,
-        buffers: [&wgpu::Buffer; 7],
+        state: [&wgpu::Buffer; 4],
+        lists: &Lists,
     ) -> wgpu::BindGroup {
-        let entries: Vec<_> = (0u32..)
-            .zip(buffers)
+        let mut entries: Vec<_> = (0u32..)
+            .zip(state.into_iter().chain([&lists.contacts, &lists.active]))
             .map(|(i, b)| super::entry(i, b))
             .collect();
+        // The span at a dynamic offset: one Span's bytes bound.
+        entries.push(wgpu::BindGroupEntry {
+            binding: 6,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &lists.spans,
+                offset: 0,
+                size: wgpu::BufferSize::new(std::mem::size_of::<Span>() as u64),
+            }),
+        });
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("self-collision pass"),
             layout,
@@ -196,38 +228,33 @@ impl DevicePass {
         contacts: &[Contact],
         colour_at: &[u32],
     ) -> Result<(), GpuError> {
-        let (n, c) = (
-            contacts.len() as u32,
-            colour_at.len().saturating_sub(1) as u32,
-        );
+        let n = contacts.len() as u32;
+        let c = colour_at.len().saturating_sub(1) as u32;
         if n > self.room.0 || c > self.room.1 {
             let ctx = self.ctx.clone();
             let room = (n.next_power_of_two(), c.next_power_of_two());
-            let (contacts, colour_at, active) =
-                ctx.scoped("self-collision pass", || Self::lists(&ctx, room))?;
-            self.bind_group = Self::bind(
-                &ctx,
-                &self.layout,
-                [
-                    &self.step,
-                    &self.pos,
-                    &self.vel,
-                    &self.start,
-                    &contacts,
-                    &colour_at,
-                    &active,
-                ],
-            );
-            (self.contacts, self.colour_at, self.active, self.room) =
-                (contacts, colour_at, active, room);
+            let stride = self.stride;
+            let lists = ctx.scoped("self-collision pass", || Self::lists(&ctx, room, stride))?;
+            let state = [&self.step, &self.pos, &self.vel, &self.start];
+            self.bind_group = Self::bind(&ctx, &self.layout, state, &lists);
+            (self.lists, self.room) = (lists, room);
+        }
+        self.colours.clear();
+        (self.colours).extend(colour_at.windows(2).map(|w| Span {
+            first: w[0],
+            end: w[1],
+            ..Span::default()
+        }));
+        let stride = self.stride as usize;
+        let mut spans = vec![0u8; self.colours.len() * stride];
+        for (k, span) in self.colours.iter().enumerate() {
+            spans[k * stride..k * stride + 16].copy_from_slice(bytemuck::bytes_of(span));
         }
         let q = &self.ctx.queue;
         if n > 0 {
-            q.write_buffer(&self.contacts, 0, bytemuck::cast_slice(contacts));
+            q.write_buffer(&self.lists.contacts, 0, bytemuck::cast_slice(contacts));
+            q.write_buffer(&self.lists.spans, 0, &spans);
         }
-        q.write_buffer(&self.colour_at, 0, bytemuck::cast_slice(colour_at));
-        self.uniform.colours = c;
-        q.write_buffer(&self.step, 0, bytemuck::bytes_of(&self.uniform));
         Ok(())
     }
 
@@ -237,7 +264,8 @@ impl DevicePass {
         q.write_buffer(&self.start, 0, bytemuck::cast_slice(start));
     }
 
-    /// One pass, in its own submit.
+    /// One pass, in its own submit: each colour's contacts pushed, colour after colour, then
+    /// their velocities settled the same way, then the places kept.
     pub fn run(&self) -> Result<(), GpuError> {
         self.ctx.scoped("self-collision pass", || {
             let mut encoder =
@@ -249,9 +277,17 @@ impl DevicePass {
                     label: Some("self-collision pass"),
                     timestamp_writes: None,
                 });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &self.bind_group, &[]);
-                pass.dispatch_workgroups(1, 1, 1);
+                let [push, settle, keep] = &self.pipelines;
+                for round in 0..=self.settles {
+                    pass.set_pipeline(if round == 0 { push } else { settle });
+                    for (k, span) in self.colours.iter().enumerate() {
+                        pass.set_bind_group(0, &self.bind_group, &[k as u32 * self.stride]);
+                        super::dispatch(&mut pass, span.end - span.first);
+                    }
+                }
+                pass.set_pipeline(keep);
+                pass.set_bind_group(0, &self.bind_group, &[0]);
+                super::dispatch(&mut pass, self.particles);
             }
             self.ctx.queue.submit([encoder.finish()]);
         })
@@ -259,7 +295,7 @@ impl DevicePass {
 
     /// The places the last pass kept as the next substep's start, into `out`.
     pub fn read_start(&self, out: &mut Vec<[f32; 4]>) -> Result<(), GpuError> {
-        let bytes = u64::from(self.uniform.particles) * 16;
+        let bytes = u64::from(self.particles) * 16;
         super::read_staging(
             &self.ctx,
             "self-collision start",
