@@ -1,18 +1,20 @@
 // Self-collision's pass on the device: the twin of `Touch::face`, `Touch::push` and
 // `Touch::settle` in src/collide/contact.rs, run after a substep's springs over the same
 // position and velocity buffers. The contacts come in colours (src/collide/colours.rs): no two
-// of a colour share a particle, so a dispatch takes a colour's side by side, colour after
-// colour, and the result is the CPU's Gauss–Seidel over the same order, the same on every
-// run. Then the passes over the pushed contacts' velocities the same way, and each particle's
-// place kept as the next substep's start for the swept test. Host side:
-// src/gpu/collide_pass.rs.
+// of a colour share a particle, so a colour's are taken side by side, colour after colour,
+// and the result is the CPU's Gauss–Seidel over the same order, the same on every run: where
+// every colour fits a workgroup, one workgroup takes them all with a barrier between colours
+// (`one_group`), else a dispatch per colour. Then the passes over the pushed contacts'
+// velocities the same way, and each particle's place kept as the next substep's start for the
+// swept test. Host side: src/gpu/collide_pass.rs.
 
 struct PassStep {
     particles: u32,
     // 1.0, read at run time so the compensated sums are not folded away.
     one: f32,
-    _pad0: u32,
-    _pad1: u32,
+    // Colours, and velocity passes after the first (`one_group`).
+    colours: u32,
+    settles: u32,
 }
 
 // A colour's contacts: contacts[first .. end].
@@ -53,6 +55,8 @@ struct Active {
 @group(0) @binding(5) var<storage, read_write> pushed: array<Active>;
 // The colour a dispatch takes (one per colour, at a dynamic offset).
 @group(0) @binding(6) var<uniform> span: Span;
+// Every colour's span (`one_group`).
+@group(0) @binding(7) var<storage, read> spans: array<Span>;
 
 fn x_of(i: u32) -> vec3<f32> {
     return pos[i].hi.xyz + pos[i].lo.xyz;
@@ -199,6 +203,28 @@ fn settle(k: u32) {
     add_velocity(c.a, -dv * it.x);
     add_velocity(c.b, -dv * it.y);
     add_velocity(c.c, -dv * it.z);
+}
+
+// Every colour in one workgroup, one after another, with the velocity passes and the places
+// kept (where no colour holds more contacts than a workgroup has invocations, this saves a
+// dispatch per colour and runs as side by side).
+@compute @workgroup_size(WORKGROUP)
+fn one_group(@builtin(local_invocation_index) t: u32) {
+    for (var round = 0u; round <= step.settles; round++) {
+        for (var c = 0u; c < step.colours; c++) {
+            for (var k = spans[c].first + t; k < spans[c].end; k += WORKGROUP) {
+                if round == 0u {
+                    face(k);
+                } else {
+                    settle(k);
+                }
+            }
+            storageBarrier();
+        }
+    }
+    for (var i = t; i < step.particles; i += WORKGROUP) {
+        start[i] = vec4(x_of(i), 0.0);
+    }
 }
 
 // One colour's contacts pushed, side by side.

@@ -215,6 +215,12 @@ pub struct SimConfig {
     /// The peak residual, as a share of the energy scale, past which a frame is reported as a
     /// [`crate::Failure::Energy`] (10 × the default tolerance); infinite to not check.
     pub energy_limit: f64,
+    /// With the springs on the GPU, self-collision's pass over its candidates runs there too,
+    /// where every candidate is a particle against a triangle and the contacts do not run on
+    /// the host (taken at each gather and [`crate::Simulation::set_config`]). Deterministic and
+    /// held to the CPU's pass over the same colours, but off by default: on the adapters
+    /// measured it is slower than the host's pass (`benches/lab/NOTES.md`, "Self-collision").
+    pub device_collide_pass: bool,
 }
 
 /// [`SimConfig::tolerance`]'s default: 1 % of the energy scale.
@@ -243,6 +249,7 @@ impl Default for SimConfig {
             tolerance: DEFAULT_TOLERANCE,
             step_budget: f64::INFINITY,
             energy_limit: DEFAULT_ENERGY_LIMIT,
+            device_collide_pass: false,
         }
     }
 }

@@ -260,7 +260,7 @@ fn pod_mirrors_match_the_wgsl_layouts() {
     );
     check_layout!(&collide_module, [collide] Centre { m, cell });
     let pass_module = parse("collide_pass.wgsl");
-    check_layout!(&pass_module, [collide_pass] PassStep { particles, one, _pad0, _pad1 });
+    check_layout!(&pass_module, [collide_pass] PassStep { particles, one, colours, settles });
     check_layout!(&pass_module, [collide_pass] Span { first, end, _pad0, _pad1 });
     check_layout!(
         &pass_module,

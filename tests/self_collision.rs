@@ -298,6 +298,11 @@ fn a_sheet_rests_at_the_thickness_beside_the_gpu_springs() {
     s.backend = Some("gpu".into());
     let run = || {
         let mut sim = Simulation::from_scene(&s).unwrap();
+        let config = SimConfig {
+            device_collide_pass: true,
+            ..*sim.config()
+        };
+        sim.set_config(config).unwrap();
         sim.step().unwrap();
         let schedule = sim.schedule().to_string();
         assert!(

@@ -21,9 +21,10 @@
 //! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
 //! substep run in one fixed order: the same on any number of threads. With the springs on the
 //! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
-//! (`device.rs`), so both back ends pass the same ones; where every candidate is a particle
-//! against a triangle and no host contact stage runs, the device runs the pass too, in colours
-//! (`colours.rs`, `device_pass.rs`). What the pushes and friction do to `E` is booked on
+//! (`device.rs`), so both back ends pass the same ones; where [`crate::SimConfig`] asks
+//! (`device_collide_pass`), every candidate is a particle against a triangle and no host
+//! contact stage runs, the device runs the pass too, in colours (`colours.rs`,
+//! `device_pass.rs`). What the pushes and friction do to `E` is booked on
 //! [`crate::EnergyAudit::contacts`] (on the device, left in the residual, as the device's
 //! contacts leave theirs).
 

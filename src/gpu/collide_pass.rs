@@ -1,8 +1,9 @@
 //! Self-collision's pass on the device (`shaders/collide_pass.wgsl`), the twin of the CPU's
 //! pass over the particle-against-triangle candidates in colour order (`project` in
 //! `src/collide/mod.rs` with its colours, `src/collide/colours.rs`): a dispatch per colour,
-//! one after another in one compute pass over the springs' position and velocity buffers, so
-//! the result is the same on every run. The host uploads the candidates at each find and the substep's
+//! one after another in one compute pass over the springs' position and velocity buffers, or
+//! one workgroup taking them all where every colour fits it, so the result is the same on
+//! every run (and the same in either form). The host uploads the candidates at each find and the substep's
 //! start places at a frame's start; the shader keeps those after each pass.
 
 use std::sync::Arc;
@@ -26,8 +27,8 @@ pub const SHADER: &str = concat!(
 pub struct PassStep {
     pub particles: u32,
     pub one: f32,
-    pub _pad0: u32,
-    pub _pad1: u32,
+    pub colours: u32,
+    pub settles: u32,
 }
 
 /// `Span` in shaders/collide_pass.wgsl: a colour's contacts, `first..end`.
@@ -63,19 +64,21 @@ pub struct Active {
     pub weights: [f32; 4],
 }
 
-/// The buffers that grow with the candidates: the contacts, what each pushed, the spans.
+/// The buffers that grow with the candidates: the contacts, what each pushed, the spans (at
+/// the dynamic offsets' stride, and packed).
 struct Lists {
     contacts: wgpu::Buffer,
     active: wgpu::Buffer,
     spans: wgpu::Buffer,
+    packed: wgpu::Buffer,
 }
 
 /// The pass of one gather over the springs' buffers.
 pub struct DevicePass {
     ctx: Arc<GpuContext>,
     layout: wgpu::BindGroupLayout,
-    /// `push_colour`, `settle_colour`, `keep_start`.
-    pipelines: [wgpu::ComputePipeline; 3],
+    /// `push_colour`, `settle_colour`, `keep_start`, `one_group`.
+    pipelines: [wgpu::ComputePipeline; 4],
     bind_group: wgpu::BindGroup,
     step: wgpu::Buffer,
     pos: wgpu::Buffer,
@@ -88,6 +91,10 @@ pub struct DevicePass {
     /// Each colour's contacts, as uploaded; the spans' dynamic-offset stride.
     colours: Vec<Span>,
     stride: u32,
+    uniform: PassStep,
+    /// One workgroup for every colour (`Some(true)`), a dispatch per colour, or (`None`) the
+    /// first where every colour fits a workgroup.
+    form: Option<bool>,
     /// Contacts and colours the lists have room for.
     room: (u32, u32),
 }
@@ -133,7 +140,7 @@ impl DevicePass {
                 &ctx2.device,
                 "self-collision pass",
                 SHADER,
-                ["push_colour", "settle_colour", "keep_start"],
+                ["push_colour", "settle_colour", "keep_start", "one_group"],
                 &[
                     Uniform { dynamic: false },
                     write,
@@ -142,18 +149,20 @@ impl DevicePass {
                     read,
                     write,
                     Uniform { dynamic: true },
+                    read,
                 ],
             );
             let uniform = PassStep {
                 particles,
                 one: 1.0,
-                ..PassStep::default()
+                colours: 0,
+                settles,
             };
             let step = super::init_buffer(
                 &ctx2.device,
                 "pass step",
                 bytemuck::bytes_of(&uniform),
-                U::UNIFORM,
+                U::UNIFORM | U::COPY_DST,
             );
             let bytes = u64::from(particles) * 16;
             let start = buffer(
@@ -179,6 +188,8 @@ impl DevicePass {
                 settles,
                 colours: Vec::new(),
                 stride,
+                uniform,
+                form: None,
                 room: (0, 0),
             }
         })
@@ -188,10 +199,12 @@ impl DevicePass {
     fn lists(ctx: &GpuContext, (n, c): (u32, u32), stride: u32) -> Lists {
         let n = u64::from(n.max(1));
         let spans = u64::from(c.max(1)) * u64::from(stride);
+        let storage = U::STORAGE | U::COPY_DST;
         Lists {
             contacts: buffer(ctx, "pass contacts", n * 32, U::STORAGE | U::COPY_DST),
             active: buffer(ctx, "pass active", n * 32, U::STORAGE),
             spans: buffer(ctx, "pass spans", spans, U::UNIFORM | U::COPY_DST),
+            packed: buffer(ctx, "pass spans, packed", u64::from(c.max(1)) * 16, storage),
         }
     }
 
@@ -214,6 +227,7 @@ impl DevicePass {
                 size: wgpu::BufferSize::new(std::mem::size_of::<Span>() as u64),
             }),
         });
+        entries.push(super::entry(7, &lists.packed));
         ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("self-collision pass"),
             layout,
@@ -254,8 +268,18 @@ impl DevicePass {
         if n > 0 {
             q.write_buffer(&self.lists.contacts, 0, bytemuck::cast_slice(contacts));
             q.write_buffer(&self.lists.spans, 0, &spans);
+            q.write_buffer(&self.lists.packed, 0, bytemuck::cast_slice(&self.colours));
         }
+        self.uniform.colours = self.colours.len() as u32;
+        q.write_buffer(&self.step, 0, bytemuck::bytes_of(&self.uniform));
         Ok(())
+    }
+
+    /// One workgroup for every colour (`Some(true)`), a dispatch per colour (`Some(false)`),
+    /// or the first where every colour fits a workgroup (`None`, the default). Both give the
+    /// same bits; the tests hold them together.
+    pub fn set_form(&mut self, one_group: Option<bool>) {
+        self.form = one_group;
     }
 
     /// Each particle's place at the substep's start (xyz).
@@ -265,7 +289,8 @@ impl DevicePass {
     }
 
     /// One pass, in its own submit: each colour's contacts pushed, colour after colour, then
-    /// their velocities settled the same way, then the places kept.
+    /// their velocities settled the same way, then the places kept (in one workgroup, or a
+    /// dispatch per colour: [`Self::set_form`]).
     pub fn run(&self) -> Result<(), GpuError> {
         self.ctx.scoped("self-collision pass", || {
             let mut encoder =
@@ -277,17 +302,24 @@ impl DevicePass {
                     label: Some("self-collision pass"),
                     timestamp_writes: None,
                 });
-                let [push, settle, keep] = &self.pipelines;
-                for round in 0..=self.settles {
-                    pass.set_pipeline(if round == 0 { push } else { settle });
-                    for (k, span) in self.colours.iter().enumerate() {
-                        pass.set_bind_group(0, &self.bind_group, &[k as u32 * self.stride]);
-                        super::dispatch(&mut pass, span.end - span.first);
+                let [push, settle, keep, one] = &self.pipelines;
+                let fits = (self.colours.iter()).all(|s| s.end - s.first <= super::WORKGROUP);
+                if self.form.unwrap_or(fits) {
+                    pass.set_pipeline(one);
+                    pass.set_bind_group(0, &self.bind_group, &[0]);
+                    pass.dispatch_workgroups(1, 1, 1);
+                } else {
+                    for round in 0..=self.settles {
+                        pass.set_pipeline(if round == 0 { push } else { settle });
+                        for (k, span) in self.colours.iter().enumerate() {
+                            pass.set_bind_group(0, &self.bind_group, &[k as u32 * self.stride]);
+                            super::dispatch(&mut pass, span.end - span.first);
+                        }
                     }
+                    pass.set_pipeline(keep);
+                    pass.set_bind_group(0, &self.bind_group, &[0]);
+                    super::dispatch(&mut pass, self.particles);
                 }
-                pass.set_pipeline(keep);
-                pass.set_bind_group(0, &self.bind_group, &[0]);
-                super::dispatch(&mut pass, self.particles);
             }
             self.ctx.queue.submit([encoder.finish()]);
         })

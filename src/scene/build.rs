@@ -432,6 +432,7 @@ impl Scene {
                 energy_limit: self
                     .energy_limit
                     .unwrap_or(crate::config::DEFAULT_ENERGY_LIMIT),
+                device_collide_pass: false,
             },
         }
     }

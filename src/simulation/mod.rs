@@ -382,6 +382,8 @@ impl Simulation {
         self.device_tethers()?;
         #[cfg(feature = "gpu")]
         self.device_air()?;
+        #[cfg(feature = "gpu")]
+        self.device_collide()?;
         self.build_schedule(self.user_stage.is_some());
         Ok(())
     }

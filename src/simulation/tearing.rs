@@ -87,12 +87,13 @@ impl Simulation {
             return Ok(());
         }
         self.collide.enable_device(gpu.shared_context())?;
-        // The pass too, unless the host's contact stage runs (its touches weigh the pushes).
+        // The pass too where asked, unless the host's contact stage runs (its touches weigh
+        // the pushes).
         let host_contacts = match &self.props {
             Some(_) => !gpu.has_contacts(),
             None => self.user_stage.is_some(),
         };
-        if self.collide.pass_fits_device() && !host_contacts {
+        if self.config.device_collide_pass && self.collide.pass_fits_device() && !host_contacts {
             let settles = crate::collide::VELOCITY_PASSES as u32 - 1;
             let n = self.packed.particle_count() as u32;
             if let Some(pass) = gpu.collide_pass(n, settles)? {
