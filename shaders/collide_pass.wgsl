@@ -62,14 +62,9 @@ fn x_of(i: u32) -> vec3<f32> {
     return pos[i].hi.xyz + pos[i].lo.xyz;
 }
 
-// x += dx, compensated (as `drift_by` in integrate.wgsl).
+// x += dx, compensated.
 fn move_by(i: u32, dx: vec3<f32>) {
-    let hi = pos[i].hi.xyz;
-    let y = dx + pos[i].lo.xyz;
-    let t = hi + y;
-    let yv = t * step.one - hi;
-    let lo = (hi - (t - yv)) + (y - yv);
-    pos[i] = Position(vec4<f32>(t, 0.0), vec4<f32>(lo, 0.0));
+    pos[i] = moved(pos[i], dx, step.one);
 }
 
 fn add_velocity(i: u32, dv: vec3<f32>) {

@@ -98,14 +98,9 @@ fn separation(a: u32, b: u32) -> vec3<f32> {
     return (pos[b].hi.xyz - pos[a].hi.xyz) + (pos[b].lo.xyz - pos[a].lo.xyz);
 }
 
-// x += dx, compensated (Knuth's two-sum: exact whatever the magnitudes).
+// x += dx, compensated.
 fn drift_by(i: u32, dx: vec3<f32>) {
-    let hi = pos[i].hi.xyz;
-    let y = dx + pos[i].lo.xyz;
-    let t = hi + y;
-    let yv = t * params.one - hi;
-    let lo = (hi - (t - yv)) + (y - yv);
-    pos[i] = Position(vec4<f32>(t, 0.0), vec4<f32>(lo, 0.0));
+    pos[i] = moved(pos[i], dx, params.one);
 }
 
 // Mirrors integrate::spring_response: the unit axis n and φ = p δ + q δ̇.

@@ -89,7 +89,12 @@ fn the_embedded_shaders_are_the_prelude_and_the_files() {
     for name in STEP_SHADERS {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
         let own = std::fs::read_to_string(dir.join(name)).unwrap();
-        for shared in ["struct Position", "override WORKGROUP", "fn linear("] {
+        for shared in [
+            "struct Position",
+            "override WORKGROUP",
+            "fn linear(",
+            "fn moved(",
+        ] {
             assert!(!own.contains(shared), "{name} declares {shared} again");
         }
     }

@@ -135,7 +135,13 @@ fn passes(search: Search) -> [&'static str; 7] {
     ]
 }
 
-fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
+/// An uninitialised buffer of `size` bytes (at least 16).
+pub(super) fn buffer(
+    ctx: &GpuContext,
+    label: &str,
+    size: u64,
+    usage: wgpu::BufferUsages,
+) -> wgpu::Buffer {
     ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: size.max(16),

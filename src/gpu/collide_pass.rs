@@ -108,15 +108,7 @@ impl std::fmt::Debug for DevicePass {
     }
 }
 
-fn buffer(ctx: &GpuContext, label: &str, size: u64, usage: wgpu::BufferUsages) -> wgpu::Buffer {
-    ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(16),
-        usage,
-        mapped_at_creation: false,
-    })
-}
-
+use super::collide::buffer;
 use wgpu::BufferUsages as U;
 
 impl DevicePass {
