@@ -159,7 +159,7 @@ impl CollideStage {
                 let layer = self.triangles[k as usize].layer;
                 if !r.is_finite()
                     || (xp - m).length_squared() >= widest * widest
-                    || (layer == lp && excluded.binary_search(&k).is_ok())
+                    || (layer == lp && self.excluded_bits.contains(s, k, excluded))
                 {
                     continue;
                 }
@@ -226,83 +226,8 @@ impl CollideStage {
 pub(super) mod tests {
     use std::collections::HashSet;
 
-    use glam::DVec3;
-
     use super::*;
-    use crate::collide::{SelfCollision, Triangle};
-
-    /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
-    /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
-    pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
-        let mut stage = CollideStage::default();
-        let mut r = super::super::uniform(11);
-        let (n, spacing) = (24usize, 0.02);
-        let length = spacing * (n - 1) as f64;
-        let (mut x, mut inv) = (Vec::new(), Vec::new());
-        for (layer, thickness) in [0.008, 0.012].into_iter().enumerate() {
-            stage.layers.push(SelfCollision {
-                thickness,
-                friction: 0.5 + 0.2 * layer as f64,
-                kinetic_friction: 0.3,
-                edges: true,
-            });
-            stage.surfaced.push(true);
-            let first = x.len() as u32;
-            for i in 0..n {
-                for j in 0..n {
-                    let (a, b) = (i as f64 * spacing, j as f64 * spacing);
-                    let rest = DVec3::new(a, 0.0, b);
-                    let p = if layer == 0 {
-                        // Folded in half along x, the halves 12 mm apart, wavy.
-                        let side = if a < 0.5 * length { -1.0 } else { 1.0 };
-                        DVec3::new(
-                            0.5 * length - (a - 0.5 * length).abs(),
-                            0.006 * side + 0.01 * (9.0 * b).sin(),
-                            b,
-                        )
-                    } else {
-                        // Flat, turned, through the fold.
-                        let (c, s) = (0.5f64.cos(), 0.5f64.sin());
-                        DVec3::new(c * a - s * b + 0.1, 0.004 + 0.02 * b, s * a + c * b - 0.1)
-                    };
-                    let noise = DVec3::new(r(), r(), r()) * 0.003;
-                    stage
-                        .members
-                        .push((first + (i * n + j) as u32, layer as u16, rest));
-                    x.push(p + noise);
-                    inv.push(if i == 0 && j < 4 { 0.0 } else { 1.0 });
-                }
-            }
-            let id = |i: usize, j: usize| first + (i * n + j) as u32;
-            for i in 0..n - 1 {
-                for j in 0..n - 1 {
-                    for at in [
-                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                    ] {
-                        let layer = layer as u16;
-                        (stage.triangles).push(Triangle {
-                            at,
-                            slots: at,
-                            layer,
-                        });
-                    }
-                }
-            }
-        }
-        stage.find_excluded();
-        stage.gather_edges();
-        stage.margin = 0.008;
-        stage.swept = (0..x.len()).map(|_| 0.002 * (1.0 + r())).collect();
-        stage.reach = stage.margin + 2.0 * stage.swept.iter().copied().fold(0.0, f64::max);
-        x[17] = DVec3::NAN;
-        let packed = Packed {
-            x,
-            inv_mass: inv,
-            ..Default::default()
-        };
-        (stage, packed)
-    }
+    pub(in crate::collide) use crate::collide::search::tests::crumpled;
 
     /// The shared context, or `None` where there is no adapter at all (a skip only when
     /// `HARMONIC_REQUIRE_GPU` is unset).

@@ -16,8 +16,9 @@
 //! slide at the mean of their coefficients (rapier's default rule).
 //!
 //! The candidates are those within their thickness plus a margin (the thinnest layer's
-//! thickness), a Verlet list: found at a frame's start and again whenever a member has moved
-//! more than half the margin since, less the members' mean move. They are found from members
+//! thickness), a Verlet list: found at a frame's start and again whenever some pair left out
+//! may have closed past the margin since ([`skin`]: members near each other moved apart by
+//! more than the margin, or any two by more than a few margins). They are found from members
 //! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
 //! substep run in one fixed order: the same on any number of threads. With the springs on the
 //! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
@@ -43,7 +44,10 @@ mod device;
 #[cfg(feature = "gpu")]
 mod device_pass;
 mod edges;
+mod near;
+mod neighbours;
 mod search;
+mod skin;
 
 /// The inverse mass a particle a collider touched in the last substep pushes with, a share of
 /// its own: ten times heavier, the lower layer of a stack is pushed into the collider by a
@@ -209,14 +213,16 @@ pub(crate) struct CollideStage {
     /// Cell keys of the members (then of the triangles' centres), sorted.
     cells: Vec<(u64, u32)>,
     triangle_cells: Vec<(u64, u32)>,
-    /// Each triangle's centre and the radius about it that holds its corners; and both with
-    /// the triangle's index in `triangle_cells`' order.
+    /// Each triangle's centre and the radius about it that holds its corners; and (`near`) both
+    /// in `triangle_cells`' order, for the search's first test.
     centres: Vec<(DVec3, f64)>,
-    centres_sorted: Vec<(DVec3, f64, u32, u16)>,
+    near: near::Near,
     /// Each member's triangles that never collide with it (neighbours along its cloth), by
     /// slot: `excluded[excluded_at[s]..excluded_at[s + 1]]`, ascending.
     excluded: Vec<u32>,
     excluded_at: Vec<u32>,
+    /// The same as bits, for the search's test.
+    excluded_bits: neighbours::Windows,
     /// The triangles' edges, each once; each edge's edges that never collide with it,
     /// as `excluded`; edge against edge, in the edges' cells' order.
     edges: Vec<edges::Edge>,
@@ -239,12 +245,15 @@ pub(crate) struct CollideStage {
     built: Vec<DVec3>,
     start: Vec<DVec3>,
     /// The thinnest layer's thickness: how far past its thickness a pair's candidate reaches
-    /// (half of it finds the candidates more often and costs more overall: on the drape with
-    /// 10 mm, 1,795 finds against 1,098 and the stage 1.3 times as long).
+    /// (on the drape with 10 mm, three quarters of it found them 1,109 times against 865, in
+    /// as long; one and a half times it, 616 times, but the flat sheet's neighbours just past
+    /// those at rest became candidates, 89 thousand, and the stage took twice as long).
     margin: f64,
     /// The reach the candidates were found with past the thickness: the margin, plus twice
     /// the largest of `swept`.
     reach: f64,
+    /// The members' blocks at the find, for the test of whether the candidates still hold.
+    skin: skin::Skin,
     /// Each member's move over the substep the candidates were found in, less the mean: a
     /// pair that crossed within it is as far apart as the two moves at most.
     swept: Vec<f64>,
@@ -405,14 +414,12 @@ impl CollideStage {
         }
     }
 
-    /// The candidates found again if some pair may have closed past the margin since they
-    /// were: a member's move since then, less the members' mean move, over half the margin
-    /// (a pair's distance, and a particle's from a triangle, changes by at most the two moves
-    /// less any common one, so none outside can have closed to its thickness, nor crossed on
-    /// the way: the moves are linear over the substep).
+    /// The candidates found again if some pair left out may have closed past the margin since
+    /// they were ([`skin::Skin::holds`]).
     fn refresh(&mut self, packed: &Packed) -> Result<(), GpuError> {
         let x = &packed.x;
-        if self.moved_past(x, false) {
+        let since = (self.members.iter().zip(&self.built)).map(|(m, b)| x[m.0 as usize] - *b);
+        if !self.skin.holds(since, self.margin) {
             let moves =
                 || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
             let finite = || moves().filter(|d| d.is_finite());
@@ -431,29 +438,6 @@ impl CollideStage {
         Ok(())
     }
 
-    /// Whether a member has moved more than half the margin since the candidates were found,
-    /// less the members' mean move; `ahead`: by the end of the next substep, if it moves as
-    /// it did over the last.
-    fn moved_past(&self, x: &[DVec3], ahead: bool) -> bool {
-        // A particle gone non-finite is the quarantine's: the others' moves decide.
-        let moves = || {
-            (self.members.iter().zip(&self.built))
-                .map(|(m, b)| {
-                    let i = m.0 as usize;
-                    let d = x[i] - *b;
-                    if ahead {
-                        d + (x[i] - self.start[i])
-                    } else {
-                        d
-                    }
-                })
-                .filter(|d| d.is_finite())
-        };
-        let mean = moves().sum::<DVec3>() / moves().count().max(1) as f64;
-        let half = 0.5 * self.margin;
-        moves().any(|d| (d - mean).length_squared() > half * half)
-    }
-
     /// The candidates within their thickness plus the margin (and the two ends' `swept`, so
     /// that a pair that crossed within the substep is found from where it ended), less
     /// neighbours along one cloth, in order.
@@ -468,6 +452,14 @@ impl CollideStage {
         self.find_pairs(packed);
         self.find_faces(packed)?;
         self.find_crossings(packed)?;
+        // How far a pair's distance may exceed that of two of their ends: across a triangle
+        // from a corner, or across two edges.
+        let radius = |c: &[(DVec3, f64)]| {
+            (c.iter().map(|c| c.1).filter(|r| r.is_finite())).fold(0.0, f64::max)
+        };
+        let across = (2.0 * radius(&self.centres)).max(4.0 * radius(&self.edge_centres));
+        let thickest = self.thickest();
+        (self.skin).build(&self.built, across, thickest, self.margin);
         if self.coloured {
             self.colour(x.len());
             #[cfg(feature = "gpu")]

@@ -6,6 +6,8 @@ use std::ops::Range;
 
 use glam::DVec3;
 
+use super::near::Near;
+use super::neighbours::Windows;
 use super::{contact, CollideStage, Face};
 use crate::buffers::Packed;
 use crate::error::GpuError;
@@ -164,13 +166,15 @@ impl CollideStage {
         self.triangle_cells.par_sort_unstable();
         // The centres beside their keys, so the search reads them in order, each radius
         // with its triangle's largest `swept` added (what the pair's reach adds for it).
-        self.centres_sorted.clear();
-        (self.centres_sorted).extend(self.triangle_cells.iter().map(|&(_, k)| {
+        let sorted = self.triangle_cells.iter().map(|&(_, k)| {
             let (m, r) = self.centres[k as usize];
             let tri = &self.triangles[k as usize];
             let swept = tri.slots.map(|s| self.swept[s as usize]);
             (m, r + swept[0].max(swept[1]).max(swept[2]), k, tri.layer)
-        }));
+        });
+        let mut near: Near = std::mem::take(&mut self.near);
+        near.fill(sorted, self.members.iter().map(|m| x[m.0 as usize]));
+        self.near = near;
         // The particles' cells in runs of whole cells, searched side by side into buffers
         // kept between finds, then joined in the cells' order: the split does not change them.
         let mut runs = std::mem::take(&mut self.runs);
@@ -201,20 +205,20 @@ impl CollideStage {
                 // The pair's reach with the thickest layer's thickness: at least the pair's
                 // (a hair over, so rounding never turns away what `face` would take).
                 let reach = (own + self.swept[s as usize]) * (1.0 + 1e-12);
-                let centres = near.iter().flat_map(|r| &self.centres_sorted[r.clone()]);
-                for &(m, swept_r, k, layer) in centres {
-                    // Within that reach of the centre, and not a neighbour at rest, first: from
-                    // the sorted copy and the particle's own list, read in order.
-                    let widest = reach + swept_r;
-                    if (xp - m).length_squared() >= widest * widest
-                        || (layer == lp && excluded.binary_search(&k).is_ok())
-                    {
-                        continue;
+                let mut hit = |i: usize| {
+                    // Within that reach of the centre (from the sorted copy), and not a
+                    // neighbour at rest, first.
+                    let (k, layer) = (self.near.triangle[i], self.near.layer[i]);
+                    if layer == lp && self.excluded_bits.contains(s, k, excluded) {
+                        return;
                     }
                     let centre = self.centres[k as usize];
                     if let Some(face) = self.face(s, k, centre, x, inv) {
                         faces.push(face);
                     }
+                };
+                for r in near {
+                    self.near.within(r.clone(), xp, reach, &mut hit);
                 }
             }
         });
@@ -273,6 +277,7 @@ impl CollideStage {
         let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
         let cell = near + widest;
         if self.triangles.is_empty() || !(cell.is_finite() && cell > 0.0) {
+            self.excluded_bits = Windows::new(&self.excluded, &self.excluded_at);
             return;
         }
         let mut members: Vec<(u64, u32)> = (0u32..)
@@ -311,6 +316,7 @@ impl CollideStage {
             }
         });
         lists(&mut pairs, &mut self.excluded, &mut self.excluded_at);
+        self.excluded_bits = Windows::new(&self.excluded, &self.excluded_at);
     }
 }
 
@@ -414,8 +420,130 @@ pub(crate) fn plane_weights(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<[f
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
+    use crate::collide::{SelfCollision, Triangle};
+
+    /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
+    /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
+    pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
+        let mut stage = CollideStage::default();
+        let mut r = super::super::uniform(11);
+        let (n, spacing) = (24usize, 0.02);
+        let length = spacing * (n - 1) as f64;
+        let (mut x, mut inv) = (Vec::new(), Vec::new());
+        for (layer, thickness) in [0.008, 0.012].into_iter().enumerate() {
+            stage.layers.push(SelfCollision {
+                thickness,
+                friction: 0.5 + 0.2 * layer as f64,
+                kinetic_friction: 0.3,
+                edges: true,
+            });
+            stage.surfaced.push(true);
+            let first = x.len() as u32;
+            for i in 0..n {
+                for j in 0..n {
+                    let (a, b) = (i as f64 * spacing, j as f64 * spacing);
+                    let rest = DVec3::new(a, 0.0, b);
+                    let p = if layer == 0 {
+                        // Folded in half along x, the halves 12 mm apart, wavy.
+                        let side = if a < 0.5 * length { -1.0 } else { 1.0 };
+                        DVec3::new(
+                            0.5 * length - (a - 0.5 * length).abs(),
+                            0.006 * side + 0.01 * (9.0 * b).sin(),
+                            b,
+                        )
+                    } else {
+                        // Flat, turned, through the fold.
+                        let (c, s) = (0.5f64.cos(), 0.5f64.sin());
+                        DVec3::new(c * a - s * b + 0.1, 0.004 + 0.02 * b, s * a + c * b - 0.1)
+                    };
+                    let noise = DVec3::new(r(), r(), r()) * 0.003;
+                    stage
+                        .members
+                        .push((first + (i * n + j) as u32, layer as u16, rest));
+                    x.push(p + noise);
+                    inv.push(if i == 0 && j < 4 { 0.0 } else { 1.0 });
+                }
+            }
+            let id = |i: usize, j: usize| first + (i * n + j) as u32;
+            for i in 0..n - 1 {
+                for j in 0..n - 1 {
+                    for at in [
+                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                    ] {
+                        let layer = layer as u16;
+                        (stage.triangles).push(Triangle {
+                            at,
+                            slots: at,
+                            layer,
+                        });
+                    }
+                }
+            }
+        }
+        stage.find_excluded();
+        stage.gather_edges();
+        stage.margin = 0.008;
+        stage.swept = (0..x.len()).map(|_| 0.002 * (1.0 + r())).collect();
+        stage.reach = stage.margin + 2.0 * stage.swept.iter().copied().fold(0.0, f64::max);
+        x[17] = DVec3::NAN;
+        let packed = Packed {
+            x,
+            inv_mass: inv,
+            ..Default::default()
+        };
+        (stage, packed)
+    }
+
+    /// The search against every member tested with every triangle by the pair's own test,
+    /// the neighbours at rest from their rest places: the same candidates, with the search's
+    /// first test in single precision, its neighbours as bits, and at scales where single
+    /// precision's rounding is thousands of times the sheets' noise.
+    #[test]
+    fn the_search_finds_what_every_pair_tested_finds() {
+        for shift in [0.0, 1e3, -4e4] {
+            let (mut stage, mut packed) = crumpled();
+            packed.x.iter_mut().for_each(|x| *x += DVec3::splat(shift));
+            stage.find_faces(&packed).unwrap();
+            let found: Vec<(u32, u32)> = stage.faces.iter().map(|f| (f.p, f.triangle)).collect();
+            let mut all = Vec::new();
+            for (s, &(p, lp, rp)) in (0u32..).zip(&stage.members) {
+                for (k, tri) in (0u32..).zip(&stage.triangles) {
+                    let [a, b, c] = tri.slots.map(|s| stage.members[s as usize].2);
+                    let w = closest_on_triangle(rp, a, b, c);
+                    let near = 2.0 * stage.layers[lp as usize].thickness;
+                    let at_rest = (rp - (a * w[0] + b * w[1] + c * w[2])).length();
+                    // A particle or triangle gone non-finite is the quarantine's, never a
+                    // candidate.
+                    let centre = stage.centres[k as usize];
+                    let finite = packed.x[p as usize].is_finite() && centre.1.is_finite();
+                    if (tri.layer == lp && at_rest < near) || !finite {
+                        continue;
+                    }
+                    if stage
+                        .face(s, k, centre, &packed.x, &packed.inv_mass)
+                        .is_some()
+                    {
+                        all.push((p, k));
+                    }
+                }
+            }
+            println!(
+                "shifted {shift} m: {} found, {} by every pair",
+                found.len(),
+                all.len()
+            );
+            assert!(all.len() > 1000, "{}", all.len());
+            let mut sorted = found.clone();
+            sorted.sort_unstable();
+            sorted.dedup();
+            assert_eq!(sorted.len(), found.len(), "a pair found twice");
+            all.sort_unstable();
+            assert_eq!(sorted, all);
+        }
+    }
 
     /// The closest point against a brute-force search over a fine barycentric lattice.
     #[test]
