@@ -424,6 +424,28 @@ pub(super) mod tests {
     use super::*;
     use crate::collide::{SelfCollision, Triangle};
 
+    /// The triangles of an `n` by `n` sheet of members from `first` (slots and packed
+    /// indices alike), two a cell.
+    pub(in crate::collide) fn grid_triangles(
+        stage: &mut CollideStage,
+        first: u32,
+        n: usize,
+        layer: u16,
+    ) {
+        let id = |i: usize, j: usize| first + (i * n + j) as u32;
+        for i in 0..n - 1 {
+            for j in 0..n - 1 {
+                for at in [
+                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                ] {
+                    let slots = at;
+                    (stage.triangles).push(Triangle { at, slots, layer });
+                }
+            }
+        }
+    }
+
     /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
     /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
     pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
@@ -466,22 +488,7 @@ pub(super) mod tests {
                     inv.push(if i == 0 && j < 4 { 0.0 } else { 1.0 });
                 }
             }
-            let id = |i: usize, j: usize| first + (i * n + j) as u32;
-            for i in 0..n - 1 {
-                for j in 0..n - 1 {
-                    for at in [
-                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                    ] {
-                        let layer = layer as u16;
-                        (stage.triangles).push(Triangle {
-                            at,
-                            slots: at,
-                            layer,
-                        });
-                    }
-                }
-            }
+            grid_triangles(&mut stage, first, n, layer as u16);
         }
         stage.find_excluded();
         stage.gather_edges();

@@ -123,7 +123,8 @@ mod tests {
 
     use crate::buffers::Packed;
     use crate::collide::search::closest_on_triangle;
-    use crate::collide::{CollideStage, SelfCollision, Triangle};
+    use crate::collide::search::tests::grid_triangles;
+    use crate::collide::{CollideStage, SelfCollision};
 
     /// Three sheets, `n` by `n` at 2 cm: 8 mm, 12 mm and 10 mm thick.
     fn sheets(n: usize) -> (CollideStage, Packed) {
@@ -144,22 +145,7 @@ mod tests {
                     stage.members.push((at, layer as u16, rest));
                 }
             }
-            let id = |i: usize, j: usize| first + (i * n + j) as u32;
-            for i in 0..n - 1 {
-                for j in 0..n - 1 {
-                    for at in [
-                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                    ] {
-                        let layer = layer as u16;
-                        (stage.triangles).push(Triangle {
-                            at,
-                            slots: at,
-                            layer,
-                        });
-                    }
-                }
-            }
+            grid_triangles(&mut stage, first, n, layer as u16);
         }
         stage.find_excluded();
         stage.gather_edges();
