@@ -18,7 +18,7 @@
 //! The candidates are those within their thickness plus a margin (the thinnest layer's
 //! thickness), a Verlet list: found at a frame's start and again whenever some pair left out
 //! may have closed past the margin since ([`skin`]: members near each other moved apart by
-//! more than the margin, or any two by more than a few margins). They are found from members
+//! more than the margin, or any two by more than twice it). They are found from members
 //! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
 //! substep run in one fixed order: the same on any number of threads. With the springs on the
 //! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
