@@ -196,7 +196,7 @@ impl CollideStage {
                     || other <= own
                     || (ms - m).length_squared() >= widest * widest
                     || (self.edges[u as usize].layer == e.layer
-                        && excluded.binary_search(&u).is_ok())
+                        && self.edge_excluded_bits.contains(s, u, excluded))
                 {
                     continue;
                 }

@@ -6,6 +6,7 @@
 
 use glam::DVec3;
 
+use super::neighbours::Windows;
 use super::search::{beside, key, lists, split_runs};
 use super::{contact, CollideStage};
 use crate::buffers::Packed;
@@ -64,6 +65,7 @@ impl CollideStage {
         let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
         let cell = near + 2.0 * widest;
         if self.edges.is_empty() || !(cell.is_finite() && cell > 0.0) {
+            self.edge_excluded_bits = Windows::new(&self.edge_excluded, &self.edge_excluded_at);
             return;
         }
         let mut cells: Vec<(u64, u32)> = (0u32..)
@@ -102,6 +104,7 @@ impl CollideStage {
             &mut self.edge_excluded,
             &mut self.edge_excluded_at,
         );
+        self.edge_excluded_bits = Windows::new(&self.edge_excluded, &self.edge_excluded_at);
     }
 
     /// Edge against edge: the edges sorted by the cell of their midpoints (cells the largest
@@ -191,7 +194,7 @@ impl CollideStage {
                 for &(m, swept_r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
                     let widest = reach + swept_r;
                     if (ms - m).length_squared() >= widest * widest
-                        || (layer == e.layer && excluded.binary_search(&u).is_ok())
+                        || (layer == e.layer && self.edge_excluded_bits.contains(s, u, excluded))
                     {
                         continue;
                     }

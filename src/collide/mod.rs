@@ -228,6 +228,7 @@ pub(crate) struct CollideStage {
     edges: Vec<edges::Edge>,
     edge_excluded: Vec<u32>,
     edge_excluded_at: Vec<u32>,
+    edge_excluded_bits: neighbours::Windows,
     crossings: Vec<edges::Crossing>,
     /// Whether the pass takes them in colours (the device's order), and the colours.
     coloured: bool,
