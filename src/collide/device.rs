@@ -49,8 +49,8 @@ impl CollideStage {
             tris: (self.triangles.iter())
                 .map(|t| [t.slots[0], t.slots[1], t.slots[2], u32::from(t.layer)])
                 .collect(),
-            excluded_at: self.excluded_at.clone(),
-            excluded: self.excluded.clone(),
+            excluded_at: self.excluded.at.clone(),
+            excluded: self.excluded.list.clone(),
             thickness: thickness.clone(),
         };
         self.device.find = Some(DeviceFind::new(ctx.clone(), &setup)?);
@@ -61,8 +61,8 @@ impl CollideStage {
                 tris: (self.edges.iter())
                     .map(|e| [e.slots[0], e.slots[1], NONE, u32::from(e.layer)])
                     .collect(),
-                excluded_at: self.edge_excluded_at.clone(),
-                excluded: self.edge_excluded.clone(),
+                excluded_at: self.edge_excluded.at.clone(),
+                excluded: self.edge_excluded.list.clone(),
                 thickness,
             };
             self.device.edges = Some(DeviceFind::new(ctx, &setup)?);
@@ -149,8 +149,6 @@ impl CollideStage {
         for &(_, s) in &self.cells {
             let (p, lp, _) = self.members[s as usize];
             let xp = x[p as usize];
-            let excluded = &self.excluded
-                [self.excluded_at[s as usize] as usize..self.excluded_at[s as usize + 1] as usize];
             d.order.clear();
             let at = d.at[s as usize] as usize..d.at[s as usize + 1] as usize;
             for &k in &d.list[at] {
@@ -159,7 +157,7 @@ impl CollideStage {
                 let layer = self.triangles[k as usize].layer;
                 if !r.is_finite()
                     || (xp - m).length_squared() >= widest * widest
-                    || (layer == lp && self.excluded_bits.contains(s, k, excluded))
+                    || (layer == lp && self.excluded.contains(s, k))
                 {
                     continue;
                 }
@@ -186,8 +184,6 @@ impl CollideStage {
             }
             let own = (key(ms, cell), s);
             let e = self.edges[s as usize];
-            let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
-                ..self.edge_excluded_at[s as usize + 1] as usize];
             for &u in &d.list[d.at[s as usize] as usize..d.at[s as usize + 1] as usize] {
                 let (m, r) = self.edge_centres[u as usize];
                 let other = (key(m, cell), u);
@@ -196,7 +192,7 @@ impl CollideStage {
                     || other <= own
                     || (ms - m).length_squared() >= widest * widest
                     || (self.edges[u as usize].layer == e.layer
-                        && self.edge_excluded_bits.contains(s, u, excluded))
+                        && self.edge_excluded.contains(s, u))
                 {
                     continue;
                 }

@@ -6,8 +6,8 @@
 
 use glam::DVec3;
 
-use super::neighbours::Windows;
-use super::search::{beside, key, lists, split_runs};
+use super::neighbours::Neighbours;
+use super::search::{beside, key, split_runs};
 use super::{contact, CollideStage};
 use crate::buffers::Packed;
 use crate::error::GpuError;
@@ -56,16 +56,13 @@ impl CollideStage {
         }
         self.edges.sort_unstable_by_key(|e| e.at);
         self.edges.dedup_by_key(|e| e.at);
-        self.edge_excluded.clear();
-        self.edge_excluded_at.clear();
-        self.edge_excluded_at.resize(self.edges.len() + 1, 0);
         let rest_of = |e: &Edge| e.slots.map(|s| self.members[s as usize].2);
         let rest: Vec<(DVec3, f64)> = self.edges.iter().map(|e| sphere(rest_of(e))).collect();
         let near = 2.0 * self.thickest();
         let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
         let cell = near + 2.0 * widest;
         if self.edges.is_empty() || !(cell.is_finite() && cell > 0.0) {
-            self.edge_excluded_bits = Windows::new(&self.edge_excluded, &self.edge_excluded_at);
+            self.edge_excluded = Neighbours::new(&mut [], self.edges.len());
             return;
         }
         let mut cells: Vec<(u64, u32)> = (0u32..)
@@ -99,12 +96,7 @@ impl CollideStage {
         // Both ways: the search meets a pair from whichever comes first in its cells' order.
         let back: Vec<(u32, u32)> = pairs.iter().map(|&(s, u)| (u, s)).collect();
         pairs.extend(back);
-        lists(
-            &mut pairs,
-            &mut self.edge_excluded,
-            &mut self.edge_excluded_at,
-        );
-        self.edge_excluded_bits = Windows::new(&self.edge_excluded, &self.edge_excluded_at);
+        self.edge_excluded = Neighbours::new(&mut pairs, self.edges.len());
     }
 
     /// Edge against edge: the edges sorted by the cell of their midpoints (cells the largest
@@ -184,8 +176,6 @@ impl CollideStage {
                 let e = self.edges[s as usize];
                 let (ms, rs) = self.edge_centres[s as usize];
                 let reach = own + (rs + self.edge_swept(&e)) * (1.0 + 1e-12);
-                let excluded = &self.edge_excluded[self.edge_excluded_at[s as usize] as usize
-                    ..self.edge_excluded_at[s as usize + 1] as usize];
                 // Each pair once, from the first of the two in the sorted order: only the later
                 // entries of the run's column, and the columns after it.
                 let (from, to) = (near[4].start, near[4].end);
@@ -194,7 +184,7 @@ impl CollideStage {
                 for &(m, swept_r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
                     let widest = reach + swept_r;
                     if (ms - m).length_squared() >= widest * widest
-                        || (layer == e.layer && self.edge_excluded_bits.contains(s, u, excluded))
+                        || (layer == e.layer && self.edge_excluded.contains(s, u))
                     {
                         continue;
                     }

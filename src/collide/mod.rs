@@ -218,17 +218,12 @@ pub(crate) struct CollideStage {
     centres: Vec<(DVec3, f64)>,
     near: near::Near,
     /// Each member's triangles that never collide with it (neighbours along its cloth), by
-    /// slot: `excluded[excluded_at[s]..excluded_at[s + 1]]`, ascending.
-    excluded: Vec<u32>,
-    excluded_at: Vec<u32>,
-    /// The same as bits, for the search's test.
-    excluded_bits: neighbours::Windows,
+    /// slot.
+    excluded: neighbours::Neighbours,
     /// The triangles' edges, each once; each edge's edges that never collide with it,
     /// as `excluded`; edge against edge, in the edges' cells' order.
     edges: Vec<edges::Edge>,
-    edge_excluded: Vec<u32>,
-    edge_excluded_at: Vec<u32>,
-    edge_excluded_bits: neighbours::Windows,
+    edge_excluded: neighbours::Neighbours,
     crossings: Vec<edges::Crossing>,
     /// Whether the pass takes them in colours (the device's order), and the colours.
     coloured: bool,

@@ -3,12 +3,46 @@
 //! within reach is one), where a binary search of the list took a chain of dependent loads.
 //! A member whose neighbours' indices spread too wide for a window keeps the list.
 
+/// Each member's neighbours at rest, as a list and as bits, built together.
+#[derive(Debug, Default)]
+pub(super) struct Neighbours {
+    /// Member `s`'s: `list[at[s]..at[s + 1]]`, ascending (what the device is sent).
+    pub(super) list: Vec<u32>,
+    pub(super) at: Vec<u32>,
+    windows: Windows,
+}
+
+impl Neighbours {
+    /// From `(member, neighbour)` pairs (each once), for `members` members.
+    pub(super) fn new(pairs: &mut [(u32, u32)], members: usize) -> Self {
+        pairs.sort_unstable();
+        let mut at = vec![0u32; members + 1];
+        let list = pairs.iter().map(|&(s, k)| {
+            at[s as usize + 1] += 1;
+            k
+        });
+        let list: Vec<u32> = list.collect();
+        for s in 1..at.len() {
+            at[s] += at[s - 1];
+        }
+        let windows = Windows::new(&list, &at);
+        Self { list, at, windows }
+    }
+
+    /// Whether `k` is among member `s`'s neighbours.
+    #[inline]
+    pub(super) fn contains(&self, s: u32, k: u32) -> bool {
+        let own = &self.list[self.at[s as usize] as usize..self.at[s as usize + 1] as usize];
+        self.windows.contains(s, k, own)
+    }
+}
+
 /// The widest window, in words of 64 bits: a 128-wide sheet's neighbours span about 16.
 const WIDEST: usize = 64;
 
 /// The windows of bits of each member's neighbours.
 #[derive(Debug, Default)]
-pub(super) struct Windows {
+struct Windows {
     /// Each member's first neighbour, its first word in `bits` and its count of words (none
     /// where it has no neighbours; [`u32::MAX`] where the list decides).
     window: Vec<(u32, u32, u32)>,
@@ -17,7 +51,7 @@ pub(super) struct Windows {
 
 impl Windows {
     /// The windows of the lists `list[at[s]..at[s + 1]]` (each ascending).
-    pub(super) fn new(list: &[u32], at: &[u32]) -> Self {
+    fn new(list: &[u32], at: &[u32]) -> Self {
         let mut w = Self::default();
         for s in at.windows(2) {
             let own = &list[s[0] as usize..s[1] as usize];
@@ -43,7 +77,7 @@ impl Windows {
 
     /// Whether `k` is among member `s`'s neighbours, `list` its list.
     #[inline]
-    pub(super) fn contains(&self, s: u32, k: u32, list: &[u32]) -> bool {
+    fn contains(&self, s: u32, k: u32, list: &[u32]) -> bool {
         let (first, start, words) = self.window[s as usize];
         if words == u32::MAX {
             return list.binary_search(&k).is_ok();

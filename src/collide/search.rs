@@ -7,7 +7,7 @@ use std::ops::Range;
 use glam::DVec3;
 
 use super::near::Near;
-use super::neighbours::Windows;
+use super::neighbours::Neighbours;
 use super::{contact, CollideStage, Face};
 use crate::buffers::Packed;
 use crate::error::GpuError;
@@ -200,8 +200,6 @@ impl CollideStage {
             for &(_, s) in run {
                 let (p, lp, _) = self.members[s as usize];
                 let xp = x[p as usize];
-                let excluded = &self.excluded[self.excluded_at[s as usize] as usize
-                    ..self.excluded_at[s as usize + 1] as usize];
                 // The pair's reach with the thickest layer's thickness: at least the pair's
                 // (a hair over, so rounding never turns away what `face` would take).
                 let reach = (own + self.swept[s as usize]) * (1.0 + 1e-12);
@@ -209,7 +207,7 @@ impl CollideStage {
                     // Within that reach of the centre (from the sorted copy), and not a
                     // neighbour at rest, first.
                     let (k, layer) = (self.near.triangle[i], self.near.layer[i]);
-                    if layer == lp && self.excluded_bits.contains(s, k, excluded) {
+                    if layer == lp && self.excluded.contains(s, k) {
                         return;
                     }
                     let centre = self.centres[k as usize];
@@ -267,9 +265,6 @@ impl CollideStage {
     /// among them): the neighbours along the cloth, which never collide. Found once, from the
     /// rest places, sorted by triangle for each member.
     pub(super) fn find_excluded(&mut self) {
-        self.excluded.clear();
-        self.excluded_at.clear();
-        self.excluded_at.resize(self.members.len() + 1, 0);
         let rest: Vec<(DVec3, f64)> = (self.triangles.iter())
             .map(|t| sphere(t.slots.map(|s| self.members[s as usize].2)))
             .collect();
@@ -277,7 +272,7 @@ impl CollideStage {
         let widest = rest.iter().map(|r| r.1).fold(0.0, f64::max);
         let cell = near + widest;
         if self.triangles.is_empty() || !(cell.is_finite() && cell > 0.0) {
-            self.excluded_bits = Windows::new(&self.excluded, &self.excluded_at);
+            self.excluded = Neighbours::new(&mut [], self.members.len());
             return;
         }
         let mut members: Vec<(u64, u32)> = (0u32..)
@@ -315,21 +310,7 @@ impl CollideStage {
                 }
             }
         });
-        lists(&mut pairs, &mut self.excluded, &mut self.excluded_at);
-        self.excluded_bits = Windows::new(&self.excluded, &self.excluded_at);
-    }
-}
-
-/// `pairs` `(s, k)` as each `s`'s `k`s, ascending, `list[at[s]..at[s + 1]]` (`at` holding one
-/// more entry than there are `s`, zeroed).
-pub(super) fn lists(pairs: &mut [(u32, u32)], list: &mut Vec<u32>, at: &mut [u32]) {
-    pairs.sort_unstable();
-    for &(s, k) in pairs.iter() {
-        list.push(k);
-        at[s as usize + 1] += 1;
-    }
-    for s in 1..at.len() {
-        at[s] += at[s - 1];
+        self.excluded = Neighbours::new(&mut pairs, self.members.len());
     }
 }
 
