@@ -89,8 +89,10 @@ pub struct SelfCollision {
     pub kinetic_friction: f64,
     /// Whether its triangles' edges are kept a thickness from those of every cloth that asks
     /// the same (and swept), besides its particles from the triangles: two triangles can
-    /// otherwise cross edge through edge where no corner comes near the other's face. It
-    /// costs: over the shipped colliding scenes the stage takes four to eight times as long.
+    /// otherwise cross edge through edge where no corner comes near the other's face. A cloth
+    /// the game pushes through itself untangles only with it: the triangles stretched where
+    /// the moved part meets the rest cross the other part edge through edge. It costs: over
+    /// the shipped colliding scenes the stage takes four to eight times as long.
     #[serde(default)]
     pub edges: bool,
 }
