@@ -427,6 +427,17 @@ pub(super) mod tests {
         }
     }
 
+    /// Whether member `s` and triangle `k` are of one layer and closer at rest than twice its
+    /// thickness (neighbours along the cloth, which never collide), by the closest point.
+    pub(in crate::collide) fn neighbours_at_rest(stage: &CollideStage, s: u32, k: u32) -> bool {
+        let (_, lp, rp) = stage.members[s as usize];
+        let tri = &stage.triangles[k as usize];
+        let [a, b, c] = tri.slots.map(|s| stage.members[s as usize].2);
+        let w = closest_on_triangle(rp, a, b, c);
+        let near = 2.0 * stage.layers[lp as usize].thickness;
+        tri.layer == lp && (rp - (a * w[0] + b * w[1] + c * w[2])).length() < near
+    }
+
     /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
     /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
     pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
@@ -497,17 +508,13 @@ pub(super) mod tests {
             stage.find_faces(&packed).unwrap();
             let found: Vec<(u32, u32)> = stage.faces.iter().map(|f| (f.p, f.triangle)).collect();
             let mut all = Vec::new();
-            for (s, &(p, lp, rp)) in (0u32..).zip(&stage.members) {
-                for (k, tri) in (0u32..).zip(&stage.triangles) {
-                    let [a, b, c] = tri.slots.map(|s| stage.members[s as usize].2);
-                    let w = closest_on_triangle(rp, a, b, c);
-                    let near = 2.0 * stage.layers[lp as usize].thickness;
-                    let at_rest = (rp - (a * w[0] + b * w[1] + c * w[2])).length();
+            for (s, &(p, _, _)) in (0u32..).zip(&stage.members) {
+                for k in 0..stage.triangles.len() as u32 {
                     // A particle or triangle gone non-finite is the quarantine's, never a
                     // candidate.
                     let centre = stage.centres[k as usize];
                     let finite = packed.x[p as usize].is_finite() && centre.1.is_finite();
-                    if (tri.layer == lp && at_rest < near) || !finite {
+                    if neighbours_at_rest(&stage, s, k) || !finite {
                         continue;
                     }
                     if stage

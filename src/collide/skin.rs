@@ -123,7 +123,7 @@ mod tests {
 
     use crate::buffers::Packed;
     use crate::collide::search::closest_on_triangle;
-    use crate::collide::search::tests::grid_triangles;
+    use crate::collide::search::tests::{grid_triangles, neighbours_at_rest};
     use crate::collide::{CollideStage, SelfCollision};
 
     /// Three sheets, `n` by `n` at 2 cm: 8 mm, 12 mm and 10 mm thick.
@@ -271,15 +271,9 @@ mod tests {
             stage.refresh(&packed).unwrap();
             let found: std::collections::HashSet<(u32, u32)> =
                 stage.faces.iter().map(|f| (f.p, f.triangle)).collect();
-            for &(p, lp, rp) in &stage.members {
+            for (s, &(p, lp, _)) in (0u32..).zip(&stage.members) {
                 for (k, tri) in (0u32..).zip(&stage.triangles) {
-                    let [a, b, c] = tri.slots.map(|s| stage.members[s as usize].2);
-                    let w = closest_on_triangle(rp, a, b, c);
-                    let near = 2.0 * stage.layers[lp as usize].thickness;
-                    if tri.at.contains(&p)
-                        || (tri.layer == lp
-                            && (rp - (a * w[0] + b * w[1] + c * w[2])).length() < near)
-                    {
+                    if tri.at.contains(&p) || neighbours_at_rest(&stage, s, k) {
                         continue;
                     }
                     let (t, _) = stage.combine(lp, tri.layer);
