@@ -260,6 +260,12 @@ pub(crate) struct CollideStage {
     moves: crate::audit::Moves,
     before_v: Vec<DVec3>,
     active: Vec<contact::Active>,
+    /// Each particle's path since the candidates were found ([`contact::Tested`]), and each
+    /// candidate's reading of its ends' paths, summed, before which it is found apart.
+    odometer: Vec<f64>,
+    due: Vec<(colours::Ends, f64)>,
+    /// Tests that waited so (for the tests of the stage).
+    waited: u64,
     /// The inverse masses the pushes move by: a particle a collider held in the last
     /// substep counts as held (see [`Self::ground`]).
     inv: Vec<f64>,
@@ -441,6 +447,9 @@ impl CollideStage {
     /// neighbours along one cloth, in order.
     fn rebuild(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.rebuilds += 1;
+        // New candidates: each tested at the next pass.
+        self.due.clear();
+        self.odometer.clear();
         let sweep = self.swept.iter().copied().fold(0.0, f64::max);
         self.reach = self.margin + 2.0 * sweep;
         let x = &packed.x;
@@ -504,6 +513,8 @@ impl CollideStage {
                 }
             }
         }
+        let (np, nf) = (self.pairs.len(), self.faces.len());
+        self.advance_odometer(&packed.x, np + nf + self.crossings.len());
         let mut touch = contact::Touch {
             x: &mut packed.x,
             v: &mut packed.v,
@@ -511,11 +522,23 @@ impl CollideStage {
             moves: &mut self.moves,
             before_v: &mut self.before_v,
             active: &mut self.active,
+            odometer: &mut self.odometer,
         };
         touch.active.clear();
-        let (np, nf) = (self.pairs.len(), self.faces.len());
+        let (due, waited) = (&mut self.due, &mut self.waited);
         let mut push = |k: usize| {
-            any |= if k < np {
+            // A contact found apart is tested again only once its sides' paths since, summed,
+            // may have closed the gap (the test would find it apart until then).
+            let (ends, at) = &mut due[k];
+            let used = ends
+                .iter()
+                .map(|&i| touch.odometer[i as usize])
+                .sum::<f64>();
+            if used < *at {
+                *waited += 1;
+                return;
+            }
+            let tested = if k < np {
                 let (a, b, t, friction) = self.pairs[k];
                 touch.points(a as usize, b as usize, t, friction)
             } else if k < np + nf {
@@ -526,6 +549,12 @@ impl CollideStage {
                 let c = &self.crossings[k - np - nf];
                 let [e, f] = [c.a, c.b].map(|k| self.edges[k as usize].at.map(|i| i as usize));
                 touch.edges(e, f, &self.start, c.thickness, c.friction)
+            };
+            any |= tested.moved;
+            *at = if tested.apart > 0.0 {
+                used + tested.apart
+            } else {
+                f64::NEG_INFINITY
             };
         };
         if self.coloured {
@@ -540,6 +569,36 @@ impl CollideStage {
             (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
         }
         any
+    }
+
+    /// Each member's move since the last pass (the springs', the colliders', the game's), less
+    /// the members' mean move, onto its odometer; the odometers and each contact's due
+    /// reading cleared where the candidates are new (`count` of them).
+    fn advance_odometer(&mut self, x: &[DVec3], count: usize) {
+        // One more odometer, always 0, for the ends a candidate lacks.
+        let none = x.len() as u32;
+        if self.due.len() != count || self.odometer.len() != x.len() + 1 {
+            let mut due = std::mem::take(&mut self.due);
+            due.clear();
+            let ends = self
+                .ends()
+                .map(|e| e.map(|i| if i == u32::MAX { none } else { i }));
+            due.extend(ends.map(|e| (e, f64::NEG_INFINITY)));
+            self.due = due;
+            self.odometer.clear();
+            self.odometer.resize(x.len() + 1, 0.0);
+            return;
+        }
+        let moves = || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
+        let finite = || moves().filter(|d| d.is_finite());
+        let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
+        for (m, d) in self.members.iter().zip(moves()) {
+            let o = &mut self.odometer[m.0 as usize];
+            *o += (d - mean).length();
+            if o.is_nan() {
+                *o = f64::INFINITY;
+            }
+        }
     }
 
     /// The particles the colliders' contacts moved in the last substep (`touched`, packed
