@@ -133,13 +133,14 @@ impl CollideStage {
         }
         // The midpoints beside their keys, so the search reads them in order, each half
         // length with its edge's larger `swept` added (what the pair's reach adds for it).
-        self.edge_sorted.clear();
-        (self.edge_sorted).extend(self.edge_cells.iter().map(|&(_, k)| {
+        let mut near = std::mem::take(&mut self.edge_near);
+        let sorted = self.edge_cells.iter().map(|&(_, k)| {
             let (m, r) = self.edge_centres[k as usize];
             let e = &self.edges[k as usize];
-            let swept = self.swept[e.slots[0] as usize].max(self.swept[e.slots[1] as usize]);
-            (m, r + swept, k, e.layer)
-        }));
+            (m, r + self.edge_swept(e), k, e.layer)
+        });
+        near.fill(sorted, self.members.iter().map(|m| x[m.0 as usize]));
+        self.edge_near = near;
         let mut runs = std::mem::take(&mut self.runs);
         split_runs(
             &self.edge_cells,
@@ -181,17 +182,20 @@ impl CollideStage {
                 let (from, to) = (near[4].start, near[4].end);
                 let from = from + self.edge_cells[from..to].partition_point(|&e| e <= (key, s));
                 let later = std::iter::once(from..to).chain(near[5..].iter().cloned());
-                for &(m, swept_r, u, layer) in later.flat_map(|r| &self.edge_sorted[r]) {
-                    let widest = reach + swept_r;
-                    if (ms - m).length_squared() >= widest * widest
-                        || (layer == e.layer && self.edge_excluded.contains(s, u))
-                    {
-                        continue;
+                let mut hit = |i: usize| {
+                    // Within the widest reach of the midpoint (from the sorted copy), and not a
+                    // neighbour at rest, first.
+                    let (u, layer) = (self.edge_near.item[i], self.edge_near.layer[i]);
+                    if layer == e.layer && self.edge_excluded.contains(s, u) {
+                        return;
                     }
                     let centre = self.edge_centres[u as usize];
                     if let Some(c) = self.crossing(s, u, (ms, rs), centre, x, inv) {
                         out.push(c);
                     }
+                };
+                for r in later {
+                    self.edge_near.within(r, ms, reach, &mut hit);
                 }
             }
         });
@@ -363,6 +367,68 @@ pub(super) fn coplanar_times(p0: [DVec3; 4], p1: [DVec3; 4]) -> ([f64; 3], usize
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::collide::search::tests::crumpled;
+
+    /// The search of the edges against every pair of edges tested by the pair's own test,
+    /// the neighbours at rest from their rest places: the same candidates, each pair once,
+    /// with the first test in single precision, also where its rounding is thousands of times
+    /// the sheets' noise.
+    #[test]
+    fn the_edges_search_finds_what_every_pair_tested_finds() {
+        for shift in [0.0, 1e3, -4e4] {
+            let (mut stage, mut packed) = crumpled();
+            packed.x.iter_mut().for_each(|x| *x += DVec3::splat(shift));
+            stage.find_crossings(&packed).unwrap();
+            let mut found: Vec<(u32, u32)> = stage.crossings.iter().map(|c| (c.a, c.b)).collect();
+            let mut all = Vec::new();
+            let rest = |k: u32| {
+                stage.edges[k as usize]
+                    .slots
+                    .map(|s| stage.members[s as usize].2)
+            };
+            for s in 0..stage.edges.len() as u32 {
+                for u in s + 1..stage.edges.len() as u32 {
+                    let (e, f) = (stage.edges[s as usize], stage.edges[u as usize]);
+                    let centres = [s, u].map(|k| stage.edge_centres[k as usize]);
+                    if centres
+                        .iter()
+                        .any(|c| !(c.0.is_finite() && c.1.is_finite()))
+                    {
+                        continue;
+                    }
+                    let [a, b] = rest(s);
+                    let [c, d] = rest(u);
+                    let (p, q) = closest_on_segments(a, b, c, d);
+                    let apart = 2.0 * stage.layers[e.layer as usize].thickness;
+                    if e.layer == f.layer && (p - q).length() < apart {
+                        continue;
+                    }
+                    let (x, inv) = (&packed.x, &packed.inv_mass);
+                    if stage
+                        .crossing(s, u, centres[0], centres[1], x, inv)
+                        .is_some()
+                    {
+                        all.push((s, u));
+                    }
+                }
+            }
+            println!(
+                "shifted {shift} m: {} found, {} by every pair",
+                found.len(),
+                all.len()
+            );
+            assert!(all.len() > 1000, "{}", all.len());
+            found = found
+                .into_iter()
+                .map(|(a, b)| (a.min(b), a.max(b)))
+                .collect();
+            found.sort_unstable();
+            let count = found.len();
+            found.dedup();
+            assert_eq!(found.len(), count, "a pair found twice");
+            assert_eq!(found, all);
+        }
+    }
 
     /// The closest points against a brute-force search over both segments.
     #[test]

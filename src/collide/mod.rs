@@ -230,10 +230,10 @@ pub(crate) struct CollideStage {
     /// Whether the pass takes them in colours (the device's order), and the colours.
     coloured: bool,
     colours: colours::Colours,
-    /// As `triangle_cells`, `centres` and `centres_sorted`, of the edges' midpoints.
+    /// As `triangle_cells`, `centres` and `near`, of the edges' midpoints.
     edge_cells: Vec<(u64, u32)>,
     edge_centres: Vec<(DVec3, f64)>,
-    edge_sorted: Vec<(DVec3, f64, u32, u16)>,
+    edge_near: near::Near,
     found_crossings: Vec<Vec<edges::Crossing>>,
     /// The particles' cells cut for the search's threads, and each part's candidates.
     runs: Vec<std::ops::Range<usize>>,

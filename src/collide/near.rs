@@ -1,5 +1,5 @@
-//! The search's first test, a chunk of triangles at a time in single precision: whether a
-//! particle is within reach of a triangle's sphere. It is widened past single precision's
+//! The search's first test, a chunk of items (triangles, or edges) at a time in single
+//! precision: whether a point is within reach of an item's sphere. It is widened past single precision's
 //! rounding, so it turns away only what the double-precision tests after it would: the
 //! candidates are the same, found without a branch per triangle.
 
@@ -16,21 +16,21 @@ const LANES: usize = 8;
 const WIDER: f64 = 2e-6;
 const PER_METRE: f64 = 1e-6;
 
-/// The triangles' spheres in the search's order, in single precision, with their triangles
-/// and layers.
+/// The items' spheres in the search's order, in single precision, with their items and
+/// layers.
 #[derive(Debug, Default)]
 pub(super) struct Near {
     x: Vec<f32>,
     y: Vec<f32>,
     z: Vec<f32>,
-    /// The radius with the triangle's `swept`, widened.
+    /// The radius with the item's `swept`, widened.
     r: Vec<f32>,
-    pub(super) triangle: Vec<u32>,
+    pub(super) item: Vec<u32>,
     pub(super) layer: Vec<u16>,
 }
 
 impl Near {
-    /// The spheres in the search's order, `(centre, radius with swept, triangle, layer)`;
+    /// The spheres in the search's order, `(centre, radius with swept, item, layer)`;
     /// `places` the particles' (the widening grows with the largest coordinate).
     pub(super) fn fill(
         &mut self,
@@ -40,7 +40,7 @@ impl Near {
         for v in [&mut self.x, &mut self.y, &mut self.z, &mut self.r] {
             v.clear();
         }
-        self.triangle.clear();
+        self.item.clear();
         self.layer.clear();
         let largest = |x: DVec3| {
             let x = x.abs().max_element();
@@ -57,7 +57,7 @@ impl Near {
             self.y.push(m.y as f32);
             self.z.push(m.z as f32);
             self.r.push((r * (1.0 + WIDER)) as f32);
-            self.triangle.push(k);
+            self.item.push(k);
             self.layer.push(layer);
         }
         let slack = (PER_METRE * scale) as f32;

@@ -206,7 +206,7 @@ impl CollideStage {
                 let mut hit = |i: usize| {
                     // Within that reach of the centre (from the sorted copy), and not a
                     // neighbour at rest, first.
-                    let (k, layer) = (self.near.triangle[i], self.near.layer[i]);
+                    let (k, layer) = (self.near.item[i], self.near.layer[i]);
                     if layer == lp && self.excluded.contains(s, k) {
                         return;
                     }
