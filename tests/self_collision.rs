@@ -76,17 +76,19 @@ fn a_sheet_rests_on_another_at_the_thickness() {
     let a = sim.diagnostics().audit;
     println!(
         "resting {lo:.6} .. {hi:.6} m over the lower sheet (thickness 0.03, g h² {sag:.1e}); \
-         {} pairs; contacts took {:.4e} J, residual {:.2e} J",
+         {} pairs found {} times; contacts took {:.4e} J, residual {:.2e} J",
         sim.collision_pairs().0,
+        sim.collision_pairs().1,
         a.contacts,
         a.residual
     );
     assert!(lo > 0.03 - 2.0 * sag && hi < 0.03 + 1e-4, "{lo} .. {hi}");
     let (pairs, found) = sim.collision_pairs();
     assert!(pairs >= 144, "{pairs}");
+    // Found as it lands; once it rests they hold from frame to frame.
     assert!(
-        (180..=180 * 8).contains(&found),
-        "found once a frame and on moves: {found}"
+        (1..180).contains(&found),
+        "found fewer times than once a frame: {found}"
     );
     assert!(
         a.contacts > 0.0,

@@ -46,6 +46,7 @@ mod device_pass;
 mod edges;
 mod near;
 mod neighbours;
+mod pass;
 mod search;
 mod skin;
 
@@ -264,6 +265,8 @@ pub(crate) struct CollideStage {
     /// candidate's reading of its ends' paths, summed, before which it is found apart.
     odometer: Vec<f64>,
     due: Vec<(colours::Ends, f64)>,
+    /// The dues by candidate across a find (scratch).
+    kept: Vec<(pass::Key, f64)>,
     /// Tests that waited so (for the tests of the stage).
     waited: u64,
     /// The inverse masses the pushes move by: a particle a collider held in the last
@@ -338,6 +341,8 @@ impl CollideStage {
         self.pairs.clear();
         self.faces.clear();
         self.crossings.clear();
+        // None found yet: the next frame's start finds them.
+        self.built.clear();
         self.colours = Default::default();
         self.rebuilds = 0;
         #[cfg(feature = "gpu")]
@@ -371,20 +376,38 @@ impl CollideStage {
     }
 
     /// A frame's start: its books opened, and the candidates found again from its state (the
-    /// game may have moved particles since the last frame), which is the first substep's
-    /// start.
+    /// first substep's start) unless they still hold: no gather since they were found (the
+    /// game's edits), no member gone non-finite, and no pair left out come within its
+    /// thickness ([`skin::Skin::holds`]). The candidates in their fixed order, a pass over
+    /// candidates that hold gives the same pushes whenever they were found.
     pub(crate) fn begin_frame(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.energy = 0.0;
         #[cfg(feature = "gpu")]
         self.start_from_device()?;
         self.swept.clear();
         self.swept.resize(self.members.len(), 0.0);
-        if std::mem::take(&mut self.resume) {
+        let resumed = std::mem::take(&mut self.resume);
+        if resumed {
             self.sweep_edits(packed);
         } else {
+            // The colliders' pushes since the last pass, before the substep starts here.
+            self.advance_odometer(&packed.x);
             self.keep_start(packed);
         }
-        self.rebuild(packed)?;
+        let x = &packed.x;
+        let since = || (self.members.iter().zip(&self.built)).map(|(m, b)| x[m.0 as usize] - *b);
+        // A member non-finite then and now is the quarantine's either way.
+        let same = |(m, b): (&(u32, u16, DVec3), &DVec3)| {
+            let x = x[m.0 as usize];
+            (x - *b).is_finite() || !(x.is_finite() || b.is_finite())
+        };
+        let found = self.built.len() == self.members.len()
+            && self.members.iter().zip(&self.built).all(same);
+        if resumed || !found || !self.skin.holds(since(), self.margin) {
+            // The odometers from 0 (a particle the game placed has its jump on none).
+            self.odometer.clear();
+            self.rebuild(packed)?;
+        }
         #[cfg(feature = "gpu")]
         self.start_to_device();
         Ok(())
@@ -447,9 +470,7 @@ impl CollideStage {
     /// neighbours along one cloth, in order.
     fn rebuild(&mut self, packed: &Packed) -> Result<(), GpuError> {
         self.rebuilds += 1;
-        // New candidates: each tested at the next pass.
-        self.due.clear();
-        self.odometer.clear();
+        self.keep_dues();
         let sweep = self.swept.iter().copied().fold(0.0, f64::max);
         self.reach = self.margin + 2.0 * sweep;
         let x = &packed.x;
@@ -459,6 +480,14 @@ impl CollideStage {
         self.find_pairs(packed);
         self.find_faces(packed)?;
         self.find_crossings(packed)?;
+        // In the order of their particles and triangles (or edges), whenever they were found.
+        use rayon::prelude::*;
+        (self.faces).par_sort_unstable_by_key(|f| (f.p, f.triangle));
+        for c in &mut self.crossings {
+            (c.a, c.b) = (c.a.min(c.b), c.a.max(c.b));
+        }
+        (self.crossings).par_sort_unstable_by_key(|c| (c.a, c.b));
+        self.set_dues(x.len());
         // How far a pair's distance may exceed that of two of their ends: across a triangle
         // from a corner, or across two edges.
         let radius = |c: &[(DVec3, f64)]| {
@@ -496,109 +525,6 @@ impl CollideStage {
         let any = self.pass(packed, gravity);
         self.keep_start(packed);
         Ok(any)
-    }
-
-    /// The pass over the candidates (in colours where the device runs it), the particles' own
-    /// energy change booked; whether any moved.
-    fn pass(&mut self, packed: &mut Packed, gravity: DVec3) -> bool {
-        let n = self.moves.moved.len();
-        self.moves.reset(n);
-        let mut any = false;
-        self.inv.clear();
-        self.inv.extend_from_slice(&packed.inv_mass);
-        if self.grounded.len() == self.inv.len() {
-            for (w, &g) in self.inv.iter_mut().zip(&self.grounded) {
-                if g {
-                    *w *= GROUNDED;
-                }
-            }
-        }
-        let (np, nf) = (self.pairs.len(), self.faces.len());
-        self.advance_odometer(&packed.x, np + nf + self.crossings.len());
-        let mut touch = contact::Touch {
-            x: &mut packed.x,
-            v: &mut packed.v,
-            inv: &self.inv,
-            moves: &mut self.moves,
-            before_v: &mut self.before_v,
-            active: &mut self.active,
-            odometer: &mut self.odometer,
-        };
-        touch.active.clear();
-        let (due, waited) = (&mut self.due, &mut self.waited);
-        let mut push = |k: usize| {
-            // A contact found apart is tested again only once its sides' paths since, summed,
-            // may have closed the gap (the test would find it apart until then).
-            let (ends, at) = &mut due[k];
-            let used = ends
-                .iter()
-                .map(|&i| touch.odometer[i as usize])
-                .sum::<f64>();
-            if used < *at {
-                *waited += 1;
-                return;
-            }
-            let tested = if k < np {
-                let (a, b, t, friction) = self.pairs[k];
-                touch.points(a as usize, b as usize, t, friction)
-            } else if k < np + nf {
-                let f = &self.faces[k - np];
-                let at = self.triangles[f.triangle as usize].at;
-                touch.face(f.p as usize, at, &self.start, f.thickness, f.friction)
-            } else {
-                let c = &self.crossings[k - np - nf];
-                let [e, f] = [c.a, c.b].map(|k| self.edges[k as usize].at.map(|i| i as usize));
-                touch.edges(e, f, &self.start, c.thickness, c.friction)
-            };
-            any |= tested.moved;
-            *at = if tested.apart > 0.0 {
-                used + tested.apart
-            } else {
-                f64::NEG_INFINITY
-            };
-        };
-        if self.coloured {
-            self.colours.order.iter().for_each(|&k| push(k as usize));
-        } else {
-            (0..np + nf + self.crossings.len()).for_each(push);
-        }
-        for _ in 1..VELOCITY_PASSES {
-            touch.settle();
-        }
-        if any {
-            (self.moves).book_particles(&self.before_v, packed, gravity, &mut self.energy);
-        }
-        any
-    }
-
-    /// Each member's move since the last pass (the springs', the colliders', the game's), less
-    /// the members' mean move, onto its odometer; the odometers and each contact's due
-    /// reading cleared where the candidates are new (`count` of them).
-    fn advance_odometer(&mut self, x: &[DVec3], count: usize) {
-        // One more odometer, always 0, for the ends a candidate lacks.
-        let none = x.len() as u32;
-        if self.due.len() != count || self.odometer.len() != x.len() + 1 {
-            let mut due = std::mem::take(&mut self.due);
-            due.clear();
-            let ends = self
-                .ends()
-                .map(|e| e.map(|i| if i == u32::MAX { none } else { i }));
-            due.extend(ends.map(|e| (e, f64::NEG_INFINITY)));
-            self.due = due;
-            self.odometer.clear();
-            self.odometer.resize(x.len() + 1, 0.0);
-            return;
-        }
-        let moves = || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
-        let finite = || moves().filter(|d| d.is_finite());
-        let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
-        for (m, d) in self.members.iter().zip(moves()) {
-            let o = &mut self.odometer[m.0 as usize];
-            *o += (d - mean).length();
-            if o.is_nan() {
-                *o = f64::INFINITY;
-            }
-        }
     }
 
     /// The particles the colliders' contacts moved in the last substep (`touched`, packed
