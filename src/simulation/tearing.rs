@@ -68,10 +68,10 @@ impl Simulation {
         &self.torn
     }
 
-    /// Self-collision's candidates ([`crate::SelfCollision`]): the pairs of particles the
-    /// last substep tested, and the times the candidates were found since the scene was last
-    /// gathered (once a frame, and again where the particles moved past their margin; 0
-    /// without a colliding cloth).
+    /// Self-collision's candidates ([`crate::SelfCollision`]): the candidate pairs of the
+    /// last substep, and the times the candidates were found since the scene was last gathered (at
+    /// the first frame, and again where particles near each other moved apart past the
+    /// margin, at a frame's start or within it; 0 without a colliding cloth).
     pub fn collision_pairs(&self) -> (usize, u64) {
         self.collide.pair_count()
     }
