@@ -370,7 +370,7 @@ mod tests {
     use glam::DVec3;
 
     use crate::buffers::Packed;
-    use crate::collide::search::tests::crumpled;
+    use crate::collide::search::tests::{bits, crumpled};
     use crate::collide::CollideStage;
 
     /// A folded sheet and a sheet sinking through it at 0.5 m/s, every particle shaken by up
@@ -403,13 +403,7 @@ mod tests {
                 stage.project(&mut packed, gravity).unwrap();
                 candidates += stage.due.len();
             }
-            let bits = (packed.x.iter().zip(&packed.v))
-                .map(|(x, v)| {
-                    let [a, b, c] = x.to_array().map(f64::to_bits);
-                    let [d, e, f] = v.to_array().map(f64::to_bits);
-                    [a, b, c, d, e, f]
-                })
-                .collect();
+            let bits = bits(&packed);
             (bits, stage.waited, candidates)
         };
         let (every, none, _) = run(false);

@@ -158,7 +158,7 @@ impl CollideStage {
 mod tests {
     use glam::DVec3;
 
-    use crate::collide::search::tests::crumpled;
+    use crate::collide::search::tests::{bits, crumpled};
 
     /// A sheet sinking slowly through a folded one, 30 frames of 8 substeps, every particle
     /// pushed up to 0.5 mm between frames: where the candidates still hold at a frame's start
@@ -194,13 +194,7 @@ mod tests {
                     stage.project(&mut packed, DVec3::ZERO).unwrap();
                 }
             }
-            let bits = (packed.x.iter().zip(&packed.v))
-                .map(|(x, v)| {
-                    let [a, b, c] = x.to_array().map(f64::to_bits);
-                    let [d, e, f] = v.to_array().map(f64::to_bits);
-                    [a, b, c, d, e, f]
-                })
-                .collect();
+            let bits = bits(&packed);
             (bits, stage.rebuilds)
         };
         let (every, found_every) = run(false);

@@ -438,6 +438,17 @@ pub(super) mod tests {
         tri.layer == lp && (rp - (a * w[0] + b * w[1] + c * w[2])).length() < near
     }
 
+    /// The places' and velocities' bits, to compare two runs.
+    pub(in crate::collide) fn bits(packed: &Packed) -> Vec<[u64; 6]> {
+        (packed.x.iter().zip(&packed.v))
+            .map(|(x, v)| {
+                let [a, b, c] = x.to_array().map(f64::to_bits);
+                let [d, e, f] = v.to_array().map(f64::to_bits);
+                [a, b, c, d, e, f]
+            })
+            .collect()
+    }
+
     /// Two crumpled sheets of different thicknesses, one folded onto itself and the other
     /// through it, with noise, held corners, per-member sweeps and a member gone non-finite.
     pub(in crate::collide) fn crumpled() -> (CollideStage, Packed) {
