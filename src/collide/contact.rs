@@ -18,8 +18,8 @@ pub(super) struct Touch<'a> {
     pub(super) before_v: &'a mut [DVec3],
     /// The contacts pushed this pass, for the passes over their velocities after.
     pub(super) active: &'a mut Vec<Active>,
-    /// Each particle's path since the candidates were found, less the members' mean move each
-    /// substep ([`Tested::apart`]): every push adds its length.
+    /// Each particle's path (its moves less the members' mean move each substep), onto which
+    /// every push adds its length ([`Tested`]; `collide/pass.rs`).
     pub(super) odometer: &'a mut [f64],
 }
 

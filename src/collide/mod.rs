@@ -16,11 +16,13 @@
 //! slide at the mean of their coefficients (rapier's default rule).
 //!
 //! The candidates are those within their thickness plus a margin (the thinnest layer's
-//! thickness), a Verlet list: found at a frame's start and again whenever some pair left out
-//! may have closed past the margin since ([`skin`]: members near each other moved apart by
-//! more than the margin, or any two by more than twice it). They are found from members
-//! and triangles sorted by cell ([`search`]), so they and the Gauss–Seidel pass over them each
-//! substep run in one fixed order: the same on any number of threads. With the springs on the
+//! thickness), a Verlet list: found at the first frame and again, at a frame's start or within
+//! it, whenever some pair left out may have closed past the margin since ([`skin`]: members
+//! near each other moved apart by more than the margin, or any two by more than twice it).
+//! They are found from members and triangles sorted by cell ([`search`]) and kept in one fixed
+//! order (by kind, then their two indices), so the Gauss–Seidel pass over them each substep
+//! gives the same bits on any number of threads and whenever they were found; a contact the
+//! pass found apart waits until its ends' paths could close the gap ([`pass`]). With the
 //! GPU the device searches, and the host keeps the CPU's candidates in the CPU's order
 //! (`device.rs`), so both back ends pass the same ones; where [`crate::SimConfig`] asks
 //! (`device_collide_pass`), every candidate is a particle against a triangle and no host
@@ -261,8 +263,9 @@ pub(crate) struct CollideStage {
     moves: crate::audit::Moves,
     before_v: Vec<DVec3>,
     active: Vec<contact::Active>,
-    /// Each particle's path since the candidates were found ([`contact::Tested`]), and each
-    /// candidate's reading of its ends' paths, summed, before which it is found apart.
+    /// Each particle's path (from 0 where the candidates are found at a frame's start), and
+    /// each candidate's ends and the reading of their paths, summed, before which it is found
+    /// apart ([`contact::Tested`], [`pass`]).
     odometer: Vec<f64>,
     due: Vec<(colours::Ends, f64)>,
     /// The dues by candidate across a find (scratch).
