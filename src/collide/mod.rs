@@ -423,9 +423,7 @@ impl CollideStage {
     /// placed there, not swept: its path from its old place is not tested.
     fn sweep_edits(&mut self, packed: &Packed) {
         let x = &packed.x;
-        let moves = || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
-        let finite = || moves().filter(|d| d.is_finite());
-        let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
+        let mean = self.mean_move(x);
         let reach = EDIT_REACH * self.thickest();
         for (s, m) in self.members.iter().enumerate() {
             let i = m.0 as usize;
@@ -436,6 +434,22 @@ impl CollideStage {
                 self.start[i] = x[i];
             }
         }
+    }
+
+    /// Each member's move since the substep's start.
+    fn moved_since_start<'a>(&'a self, x: &'a [DVec3]) -> impl Iterator<Item = DVec3> + 'a {
+        (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize])
+    }
+
+    /// The members' mean move since the substep's start, over the finite ones.
+    fn mean_move(&self, x: &[DVec3]) -> DVec3 {
+        let finite = || self.moved_since_start(x).filter(|d| d.is_finite());
+        finite().sum::<DVec3>() / finite().count().max(1) as f64
+    }
+
+    /// The candidates: particle pairs, faces and edge pairs.
+    fn candidate_count(&self) -> usize {
+        self.pairs.len() + self.faces.len() + self.crossings.len()
     }
 
     fn keep_start(&mut self, packed: &Packed) {
@@ -450,12 +464,10 @@ impl CollideStage {
         let x = &packed.x;
         let since = (self.members.iter().zip(&self.built)).map(|(m, b)| x[m.0 as usize] - *b);
         if !self.skin.holds(since, self.margin) {
-            let moves =
-                || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
-            let finite = || moves().filter(|d| d.is_finite());
-            let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
-            self.swept.clear();
-            (self.swept).extend(moves().map(|d| {
+            let mean = self.mean_move(x);
+            let mut swept = std::mem::take(&mut self.swept);
+            swept.clear();
+            swept.extend(self.moved_since_start(x).map(|d| {
                 let s = (d - mean).length();
                 if s.is_finite() {
                     s
@@ -463,6 +475,7 @@ impl CollideStage {
                     0.0
                 }
             }));
+            self.swept = swept;
             self.rebuild(packed)?;
         }
         Ok(())
@@ -509,10 +522,7 @@ impl CollideStage {
 
     /// The candidates, and the times they were found since the stage was gathered.
     pub(crate) fn pair_count(&self) -> (usize, u64) {
-        (
-            self.pairs.len() + self.faces.len() + self.crossings.len(),
-            self.rebuilds,
-        )
+        (self.candidate_count(), self.rebuilds)
     }
 
     /// After a substep's springs: one pass over the candidates in order (particle against

@@ -100,7 +100,7 @@ impl CollideStage {
     pub(super) fn keep_dues(&mut self) {
         let mut kept = std::mem::take(&mut self.kept);
         kept.clear();
-        let count = self.pairs.len() + self.faces.len() + self.crossings.len();
+        let count = self.candidate_count();
         if !self.odometer.is_empty() && self.due.len() == count {
             kept.extend(self.keys().zip(self.due.iter().map(|d| d.1)));
         }
@@ -135,22 +135,22 @@ impl CollideStage {
     /// the members' mean move, onto its odometer (or the dues set, where the candidates have
     /// none yet).
     pub(super) fn advance_odometer(&mut self, x: &[DVec3]) {
-        let count = self.pairs.len() + self.faces.len() + self.crossings.len();
+        let count = self.candidate_count();
         if self.due.len() != count || self.odometer.len() != x.len() + 1 {
             self.odometer.clear();
             self.set_dues(x.len());
             return;
         }
-        let moves = || (self.members.iter()).map(|m| x[m.0 as usize] - self.start[m.0 as usize]);
-        let finite = || moves().filter(|d| d.is_finite());
-        let mean = finite().sum::<DVec3>() / finite().count().max(1) as f64;
-        for (m, d) in self.members.iter().zip(moves()) {
-            let o = &mut self.odometer[m.0 as usize];
+        let mean = self.mean_move(x);
+        let mut odometer = std::mem::take(&mut self.odometer);
+        for (m, d) in self.members.iter().zip(self.moved_since_start(x)) {
+            let o = &mut odometer[m.0 as usize];
             *o += (d - mean).length();
             if o.is_nan() {
                 *o = f64::INFINITY;
             }
         }
+        self.odometer = odometer;
     }
 }
 
